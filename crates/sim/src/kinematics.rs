@@ -1,0 +1,192 @@
+//! Forward and inverse kinematics of a serial chain, in f64, straight from the robot model.
+//!
+//! Written here rather than taken from rapier's multibody IK because that solver's Jacobian refers
+//! to each body's centre of mass (not the target frame) and ignores joint limits; a planner needs
+//! limit-aware solutions for an arbitrary tool frame, independent of the physics state.
+
+use crate::error::{Result, SimError};
+use crate::model::{JointKind, Origin, RobotModel};
+use rapier3d::na::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+
+/// An origin as an isometry: translation then fixed-axis roll-pitch-yaw (URDF convention).
+pub fn origin_to_isometry(o: &Origin) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(o.xyz[0], o.xyz[1], o.xyz[2]),
+        UnitQuaternion::from_euler_angles(o.rpy[0], o.rpy[1], o.rpy[2]),
+    )
+}
+
+#[derive(Clone, Debug)]
+struct ChainJoint {
+    origin: Isometry3<f64>,
+    axis: Vector3<f64>,
+    kind: JointKind,
+    /// Position of this joint's value in the chain's joint vector, `None` for fixed joints.
+    dof: Option<usize>,
+}
+
+/// The joints from the root link to a tip frame, with the movable ones as the joint vector.
+#[derive(Clone, Debug)]
+pub struct SerialChain {
+    joints: Vec<ChainJoint>,
+    /// Names of the movable joints, in joint-vector order.
+    pub joint_names: Vec<String>,
+    /// `(lower, upper)` for each movable joint.
+    pub limits: Vec<(f64, f64)>,
+    /// Extra transform from the tip link to the tool frame.
+    pub tool: Isometry3<f64>,
+}
+
+impl SerialChain {
+    /// The chain from `model`'s root to the link `tip`.
+    pub fn new(model: &RobotModel, tip: &str) -> Result<Self> {
+        let tip_index = model.link_index(tip).ok_or_else(|| {
+            SimError::urdf(&model.source_name, format!("link '{tip}'"), "no such link")
+        })?;
+        let mut joints = Vec::new();
+        let mut joint_names = Vec::new();
+        let mut limits = Vec::new();
+        for j in model.chain_to(tip_index) {
+            let joint = &model.joints[j];
+            if joint.mimic.is_some() {
+                return Err(SimError::urdf(
+                    &model.source_name,
+                    format!("joint '{}'", joint.name),
+                    "a mimic joint cannot be part of a kinematic chain to the tool",
+                ));
+            }
+            let dof = joint.kind.is_movable().then(|| {
+                joint_names.push(joint.name.clone());
+                let l = joint
+                    .limits
+                    .map(|l| (l.lower, l.upper))
+                    .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+                limits.push(l);
+                joint_names.len() - 1
+            });
+            joints.push(ChainJoint {
+                origin: origin_to_isometry(&joint.origin),
+                axis: Vector3::from(joint.axis),
+                kind: joint.kind,
+                dof,
+            });
+        }
+        Ok(Self {
+            joints,
+            joint_names,
+            limits,
+            tool: Isometry3::identity(),
+        })
+    }
+
+    /// Number of movable joints.
+    pub fn dof(&self) -> usize {
+        self.joint_names.len()
+    }
+
+    /// The tool frame pose (in the root link frame) at joint vector `q`.
+    pub fn forward(&self, q: &[f64]) -> Isometry3<f64> {
+        let mut pose = Isometry3::identity();
+        for joint in &self.joints {
+            pose *= joint.origin;
+            if let Some(i) = joint.dof {
+                let motion = match joint.kind {
+                    JointKind::Prismatic => Isometry3::from_parts(
+                        Translation3::from(joint.axis * q[i]),
+                        UnitQuaternion::identity(),
+                    ),
+                    _ => Isometry3::from_parts(
+                        Translation3::identity(),
+                        UnitQuaternion::from_scaled_axis(joint.axis * q[i]),
+                    ),
+                };
+                pose *= motion;
+            }
+        }
+        pose * self.tool
+    }
+
+    /// Geometric Jacobian (linear; angular rows, world frame) of the tool frame, by central
+    /// differences: exact enough for IK and cheap for six joints.
+    fn jacobian(&self, q: &[f64]) -> rapier3d::na::DMatrix<f64> {
+        let n = self.dof();
+        let mut jac = rapier3d::na::DMatrix::zeros(6, n);
+        let h = 1e-6;
+        let mut qp = q.to_vec();
+        for i in 0..n {
+            qp[i] = q[i] + h;
+            let plus = self.forward(&qp);
+            qp[i] = q[i] - h;
+            let minus = self.forward(&qp);
+            qp[i] = q[i];
+            let dp = (plus.translation.vector - minus.translation.vector) / (2.0 * h);
+            let dr = (plus.rotation * minus.rotation.inverse()).scaled_axis() / (2.0 * h);
+            for r in 0..3 {
+                jac[(r, i)] = dp[r];
+                jac[(r + 3, i)] = dr[r];
+            }
+        }
+        jac
+    }
+
+    /// Damped-least-squares IK from `seed`, staying within joint limits.
+    ///
+    /// Returns the joint vector whose tool pose is within `tolerance` (metres; radians for the
+    /// orientation) of `target`, or an error with the residual.
+    pub fn inverse(
+        &self,
+        target: &Isometry3<f64>,
+        seed: &[f64],
+        tolerance: f64,
+    ) -> Result<Vec<f64>> {
+        let n = self.dof();
+        if seed.len() != n {
+            return Err(SimError::Command(format!(
+                "IK seed has {} values, the chain has {n} joints",
+                seed.len()
+            )));
+        }
+        let mut q: Vec<f64> = seed
+            .iter()
+            .zip(&self.limits)
+            .map(|(v, (lo, hi))| v.clamp(*lo, *hi))
+            .collect();
+        let mut error = f64::INFINITY;
+        for _ in 0..200 {
+            let pose = self.forward(&q);
+            let e = pose_error(&pose, target);
+            error = e.norm();
+            if e.fixed_rows::<3>(0).norm() < tolerance && e.fixed_rows::<3>(3).norm() < tolerance {
+                return Ok(q);
+            }
+            let jac = self.jacobian(&q);
+            // dq = Jᵀ (J Jᵀ + λ² I)⁻¹ e, with damping growing near singularities.
+            let lambda2 = 1e-4 + 1e-2 * error.min(1.0);
+            let jjt: Matrix6<f64> = (&jac * jac.transpose())
+                .fixed_view::<6, 6>(0, 0)
+                .into_owned()
+                + Matrix6::identity() * lambda2;
+            let Some(inv) = jjt.try_inverse() else {
+                break;
+            };
+            let dq = jac.transpose() * (inv * e);
+            // Limit the step so the linearisation stays valid.
+            let scale = (0.3 / dq.amax()).min(1.0);
+            for i in 0..n {
+                let (lo, hi) = self.limits[i];
+                q[i] = (q[i] + dq[i] * scale).clamp(lo, hi);
+            }
+        }
+        Err(SimError::Ik(format!(
+            "residual {error:.4} after 200 iterations (target {:?})",
+            target.translation.vector.as_slice()
+        )))
+    }
+}
+
+/// The 6-vector (position error; rotation error as a scaled axis), world frame.
+pub fn pose_error(current: &Isometry3<f64>, target: &Isometry3<f64>) -> Vector6<f64> {
+    let dp = target.translation.vector - current.translation.vector;
+    let dr = (target.rotation * current.rotation.inverse()).scaled_axis();
+    Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
+}

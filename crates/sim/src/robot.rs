@@ -1,0 +1,654 @@
+//! A [`RobotModel`] built into rapier as one multibody (reduced coordinates), and its control.
+//!
+//! Links joined by fixed joints are merged into one rigid body (their colliders and mass added
+//! up), so `tool0`, a gripper base and a TCP frame cost nothing at run time. Every movable joint
+//! becomes a multibody joint with a force-based PD motor capped at the URDF effort limit; URDF
+//! `<mimic>` becomes a rapier DOF coupling (this is how the two gripper fingers move as one).
+
+use crate::error::{Result, SimError};
+use crate::kinematics::origin_to_isometry;
+use crate::math::{iso_to_pose, pose_to_iso};
+use crate::model::{Geometry, JointKind, MeshCollision, RobotModel, Shape};
+use rapier3d::na::Isometry3;
+use rapier3d::prelude::*;
+use std::collections::HashMap;
+
+/// Collision groups of the scene. Robot links meet the table and objects; robot self-contacts
+/// are governed by the multibody's own switch, not by groups.
+pub mod groups {
+    use rapier3d::prelude::Group;
+    pub const ROBOT: Group = Group::GROUP_1;
+    pub const TABLE: Group = Group::GROUP_2;
+    pub const OBJECT: Group = Group::GROUP_3;
+}
+
+/// How a model becomes bodies, colliders and joints.
+#[derive(Clone, Debug)]
+pub struct RobotBuildOptions {
+    /// Pose of the root link in the world.
+    pub base_pose: Isometry3<f64>,
+    /// Contacts between non-adjacent links of the robot (adjacent links never collide).
+    pub self_collision: bool,
+    pub mesh_collision: MeshCollision,
+    /// Friction of robot colliders unless overridden per link.
+    pub friction: f32,
+    /// Friction per link name (e.g. high-friction finger pads).
+    pub link_friction: HashMap<String, f32>,
+    /// Rotor inertia added to every joint (kg·m² or kg): real geared joints have a large one,
+    /// and it keeps stiff PD motors on light links stable.
+    pub armature: f32,
+}
+
+impl Default for RobotBuildOptions {
+    fn default() -> Self {
+        Self {
+            base_pose: Isometry3::identity(),
+            self_collision: false,
+            mesh_collision: MeshCollision::ConvexHull,
+            friction: 0.8,
+            link_friction: HashMap::new(),
+            armature: 0.05,
+        }
+    }
+}
+
+/// PD gains of a joint's position motor: torque = kp·(q* − q) + kd·(q̇* − q̇), capped at the effort
+/// limit (N·m/rad and N·m·s/rad, or N/m and N·s/m for prismatic joints).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PdGains {
+    pub kp: f32,
+    pub kd: f32,
+}
+
+/// A movable joint of the built robot.
+#[derive(Clone, Debug)]
+pub struct RobotJoint {
+    pub name: String,
+    pub kind: JointKind,
+    /// Index into the model's joints.
+    pub model_index: usize,
+    /// The multibody link this joint moves.
+    link_id: usize,
+    /// `(lower, upper)` position limits; infinite for continuous joints.
+    pub limits: (f32, f32),
+    pub effort: f32,
+    pub velocity: f32,
+    /// Mimicked joint (index into [`Robot::joints`]) with multiplier and offset.
+    pub mimic: Option<(usize, f32, f32)>,
+}
+
+impl RobotJoint {
+    fn axis(&self) -> JointAxis {
+        match self.kind {
+            JointKind::Prismatic => JointAxis::LinX,
+            _ => JointAxis::AngX,
+        }
+    }
+    fn coord_index(&self) -> usize {
+        match self.kind {
+            JointKind::Prismatic => 0,
+            _ => 3,
+        }
+    }
+}
+
+/// Commands applied at every physics step until replaced.
+#[derive(Clone, Debug, PartialEq)]
+enum DriveMode {
+    Position,
+    /// Joint torques (N·m or N), one per joint of [`Robot::joints`].
+    Torque(Vec<f32>),
+}
+
+/// The robot inside a physics world: handles, joint table and motor settings.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    pub model: RobotModel,
+    multibody: MultibodyIndex,
+    /// Rigid bodies after merging fixed links; `bodies[0]` is the root.
+    pub bodies: Vec<RigidBodyHandle>,
+    /// For each model link: its body (index into `bodies`) and pose in that body.
+    link_frames: Vec<(usize, Pose)>,
+    /// Movable joints, in model (root-to-leaf) order.
+    pub joints: Vec<RobotJoint>,
+    targets: Vec<f32>,
+    gains: Vec<PdGains>,
+    mode: DriveMode,
+}
+
+fn shape_of(geometry: &Geometry, mode: MeshCollision) -> Option<(SharedShape, Pose)> {
+    let shape = match geometry {
+        Geometry::Box { size } => SharedShape::cuboid(
+            size[0] as f32 / 2.0,
+            size[1] as f32 / 2.0,
+            size[2] as f32 / 2.0,
+        ),
+        Geometry::Cylinder { radius, length } => {
+            // rapier's cylinder axis is y, URDF's is z.
+            return Some((
+                SharedShape::cylinder(*length as f32 / 2.0, *radius as f32),
+                Pose::rotation(Vector::X * std::f32::consts::FRAC_PI_2),
+            ));
+        }
+        Geometry::Capsule { radius, length } => {
+            SharedShape::capsule_z(*length as f32 / 2.0, *radius as f32)
+        }
+        Geometry::Sphere { radius } => SharedShape::ball(*radius as f32),
+        Geometry::Mesh { scale, mesh, .. } => {
+            let points: Vec<Vector> = mesh
+                .vertices
+                .iter()
+                .map(|v| {
+                    Vector::new(
+                        v[0] * scale[0] as f32,
+                        v[1] * scale[1] as f32,
+                        v[2] * scale[2] as f32,
+                    )
+                })
+                .collect();
+            // The hull and V-HACD routines index into user geometry: contain any panic.
+            let built = std::panic::catch_unwind(|| match mode {
+                MeshCollision::ConvexHull => SharedShape::convex_hull(&points),
+                MeshCollision::ConvexDecomposition => {
+                    Some(SharedShape::convex_decomposition(&points, &mesh.triangles))
+                }
+            });
+            built.ok().flatten()?
+        }
+    };
+    Some((shape, Pose::IDENTITY))
+}
+
+impl Robot {
+    /// Builds `model` into the world's sets as one multibody rooted at a fixed base.
+    pub fn build(
+        model: RobotModel,
+        options: &RobotBuildOptions,
+        bodies: &mut RigidBodySet,
+        colliders: &mut ColliderSet,
+        multibody_joints: &mut MultibodyJointSet,
+    ) -> Result<Self> {
+        // 1. Group links into bodies: a link joined to its parent by a fixed joint rides on the
+        //    parent's body. Joints are sorted root to leaves, so parents are placed first.
+        let n_links = model.links.len();
+        let mut link_frames: Vec<Option<(usize, Isometry3<f64>)>> = vec![None; n_links];
+        let mut body_links: Vec<usize> = vec![model.root];
+        link_frames[model.root] = Some((0, Isometry3::identity()));
+        for joint in &model.joints {
+            let (parent_body, parent_offset) =
+                link_frames[joint.parent].expect("joints are sorted root to leaves");
+            if joint.kind == JointKind::Fixed {
+                link_frames[joint.child] =
+                    Some((parent_body, parent_offset * origin_to_isometry(&joint.origin)));
+            } else {
+                link_frames[joint.child] = Some((body_links.len(), Isometry3::identity()));
+                body_links.push(joint.child);
+            }
+        }
+        let link_frames: Vec<(usize, Isometry3<f64>)> =
+            link_frames.into_iter().map(|f| f.expect("tree")).collect();
+
+        // 2. World poses at q = 0, to place bodies before the multibody takes over.
+        let mut world_of_link = vec![options.base_pose; n_links];
+        for joint in &model.joints {
+            world_of_link[joint.child] =
+                world_of_link[joint.parent] * origin_to_isometry(&joint.origin);
+        }
+
+        // 3. Bodies with summed mass properties and colliders.
+        let mut handles = Vec::with_capacity(body_links.len());
+        for (b, &link) in body_links.iter().enumerate() {
+            let mut mass = MassProperties::default();
+            for (l, (body, offset)) in link_frames.iter().enumerate() {
+                if *body != b {
+                    continue;
+                }
+                if let Some(inertial) = &model.links[l].inertial {
+                    let i = inertial.inertia.map(|v| v as f32);
+                    let matrix = Matrix::from_cols_array(&[
+                        i[0], i[1], i[2], i[1], i[3], i[4], i[2], i[4], i[5],
+                    ]);
+                    let local = MassProperties::with_inertia_matrix(
+                        Vector::ZERO,
+                        inertial.mass as f32,
+                        matrix,
+                    );
+                    let frame = offset * origin_to_isometry(&inertial.origin);
+                    mass += local.transform_by(&iso_to_pose(&frame));
+                }
+            }
+            let builder = if b == 0 {
+                RigidBodyBuilder::fixed()
+            } else {
+                RigidBodyBuilder::dynamic()
+                    .additional_mass_properties(mass)
+                    // A sleeping link ignores new motor targets.
+                    .can_sleep(false)
+            };
+            let handle = bodies.insert(builder.pose(iso_to_pose(&world_of_link[link])).build());
+            handles.push(handle);
+        }
+        let filter = if options.self_collision {
+            Group::ALL
+        } else {
+            groups::TABLE | groups::OBJECT
+        };
+        let collision_groups =
+            InteractionGroups::new(groups::ROBOT, filter, InteractionTestMode::And);
+        for (l, (body, offset)) in link_frames.iter().enumerate() {
+            let link = &model.links[l];
+            let friction = options
+                .link_friction
+                .get(&link.name)
+                .copied()
+                .unwrap_or(options.friction);
+            for (k, Shape {
+                origin, geometry, ..
+            }) in link.collisions.iter().enumerate()
+            {
+                let (shape, adjust) =
+                    shape_of(geometry, options.mesh_collision).ok_or_else(|| {
+                        SimError::urdf(
+                            &model.source_name,
+                            format!("link '{}' <collision> #{}", link.name, k + 1),
+                            "could not build a convex collision shape from this mesh \
+                             (degenerate or flat)",
+                        )
+                    })?;
+                let pose = iso_to_pose(&(offset * origin_to_isometry(origin))) * adjust;
+                let collider = ColliderBuilder::new(shape)
+                    .position(pose)
+                    .density(0.0)
+                    .friction(friction)
+                    .collision_groups(collision_groups)
+                    .build();
+                colliders.insert_with_parent(collider, handles[*body], bodies);
+            }
+        }
+
+        // 4. Multibody joints for movable joints.
+        let mut joints = Vec::new();
+        let mut joint_handles = Vec::new();
+        for (model_index, joint) in model.joints.iter().enumerate() {
+            if joint.kind == JointKind::Fixed {
+                continue;
+            }
+            let (parent_body, parent_offset) = link_frames[joint.parent];
+            let (child_body, _) = link_frames[joint.child];
+            let axis = Vector::new(joint.axis[0] as f32, joint.axis[1] as f32, joint.axis[2] as f32);
+            // rapier's free axis is the joint frame's x: rotate x onto the URDF axis.
+            let basis = Pose::from_rotation(GenericJoint::complete_ang_frame(axis));
+            let frame1 = iso_to_pose(&(parent_offset * origin_to_isometry(&joint.origin))) * basis;
+            let locked = match joint.kind {
+                JointKind::Prismatic => JointAxesMask::LOCKED_PRISMATIC_AXES,
+                _ => JointAxesMask::LOCKED_REVOLUTE_AXES,
+            };
+            let rj = RobotJoint {
+                name: joint.name.clone(),
+                kind: joint.kind,
+                model_index,
+                link_id: 0,
+                limits: joint
+                    .limits
+                    .map(|l| (l.lower as f32, l.upper as f32))
+                    .unwrap_or((f32::NEG_INFINITY, f32::INFINITY)),
+                effort: joint.limits.map(|l| l.effort as f32).unwrap_or(f32::MAX),
+                velocity: joint.limits.map(|l| l.velocity as f32).unwrap_or(f32::MAX),
+                mimic: None,
+            };
+            let mut builder = GenericJointBuilder::new(locked)
+                .local_frame1(frame1)
+                .local_frame2(basis)
+                .contacts_enabled(false)
+                .motor_model(rj.axis(), MotorModel::ForceBased)
+                .motor_max_force(rj.axis(), rj.effort);
+            if joint.kind != JointKind::Continuous {
+                builder = builder.limits(rj.axis(), [rj.limits.0, rj.limits.1]);
+            }
+            let handle = multibody_joints
+                .insert(handles[parent_body], handles[child_body], builder.build(), true)
+                .ok_or_else(|| {
+                    SimError::urdf(
+                        &model.source_name,
+                        format!("joint '{}'", joint.name),
+                        "rapier refused the joint (would close a loop)",
+                    )
+                })?;
+            joint_handles.push(handle);
+            joints.push(rj);
+        }
+        let multibody = match joint_handles.first() {
+            Some(&h) => {
+                let link = multibody_joints
+                    .rigid_body_link(handles[0])
+                    .ok_or_else(|| SimError::Command("robot root is not in a multibody".into()))?;
+                let _ = h;
+                link.multibody
+            }
+            None => {
+                return Err(SimError::urdf(
+                    &model.source_name,
+                    "robot",
+                    "has no movable joint; nothing to simulate",
+                ));
+            }
+        };
+        for (j, joint) in joints.iter_mut().enumerate() {
+            let (_, body) = link_frames[model.joints[joint.model_index].child];
+            let _ = body;
+            let child_body = handles[link_frames[model.joints[joint.model_index].child].0];
+            joint.link_id = multibody_joints
+                .rigid_body_link(child_body)
+                .map(|l| l.id)
+                .ok_or_else(|| SimError::Command(format!("joint {j} lost its multibody link")))?;
+        }
+        // Mimic joints become DOF couplings.
+        let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
+        for j in 0..joints.len() {
+            let model_joint = &model.joints[joints[j].model_index];
+            if let Some(m) = model_joint.mimic {
+                let leader_name = &model.joints[m.joint].name;
+                let leader = names.iter().position(|n| n == leader_name).ok_or_else(|| {
+                    SimError::urdf(
+                        &model.source_name,
+                        format!("joint '{}'", model_joint.name),
+                        format!("mimics '{leader_name}', which is not movable"),
+                    )
+                })?;
+                joints[j].mimic = Some((leader, m.multiplier as f32, m.offset as f32));
+            }
+        }
+        let mb = multibody_joints
+            .get_multibody_mut(multibody)
+            .ok_or_else(|| SimError::Command("robot multibody missing".into()))?;
+        mb.set_self_contacts_enabled(options.self_collision);
+        for joint in &joints {
+            let link = mb.link(joint.link_id).expect("link id from rapier");
+            let dof = link.assembly_id();
+            mb.armature_mut()[dof] = options.armature;
+            mb.damping_mut()[dof] = model.joints[joint.model_index].damping as f32;
+            if let Some((leader, multiplier, offset)) = joint.mimic {
+                let leader = &joints[leader];
+                mb.add_dof_coupling(MultibodyDofCoupling {
+                    link1: leader.link_id,
+                    dof1: 0,
+                    axis1: leader.coord_index(),
+                    link2: joint.link_id,
+                    dof2: 0,
+                    axis2: joint.coord_index(),
+                    coeff: multiplier,
+                    offset,
+                });
+            }
+        }
+
+        let n = joints.len();
+        let mut robot = Robot {
+            model,
+            multibody,
+            bodies: handles,
+            link_frames: link_frames
+                .into_iter()
+                .map(|(b, offset)| (b, iso_to_pose(&offset)))
+                .collect(),
+            joints,
+            targets: vec![0.0; n],
+            gains: vec![PdGains { kp: 0.0, kd: 0.0 }; n],
+            mode: DriveMode::Position,
+        };
+        robot.set_gains_all(PdGains {
+            kp: 2_000.0,
+            kd: 100.0,
+        });
+        robot.apply_motors(multibody_joints);
+        Ok(robot)
+    }
+
+    /// Index of the joint called `name` in [`Self::joints`].
+    pub fn joint_index(&self, name: &str) -> Option<usize> {
+        self.joints.iter().position(|j| j.name == name)
+    }
+
+    fn multibody<'a>(&self, set: &'a MultibodyJointSet) -> &'a Multibody {
+        set.get_multibody(self.multibody)
+            .expect("the robot's multibody lives as long as the world")
+    }
+
+    fn multibody_mut<'a>(&self, set: &'a mut MultibodyJointSet) -> &'a mut Multibody {
+        set.get_multibody_mut(self.multibody)
+            .expect("the robot's multibody lives as long as the world")
+    }
+
+    /// Positions of all movable joints (rad or m), in [`Self::joints`] order.
+    pub fn joint_positions(&self, set: &MultibodyJointSet) -> Vec<f32> {
+        let mb = self.multibody(set);
+        self.joints
+            .iter()
+            .map(|j| mb.link(j.link_id).expect("link").joint.coords()[j.coord_index()])
+            .collect()
+    }
+
+    /// Velocities of all movable joints (rad/s or m/s).
+    pub fn joint_velocities(&self, set: &MultibodyJointSet) -> Vec<f32> {
+        let mb = self.multibody(set);
+        self.joints
+            .iter()
+            .map(|j| mb.joint_velocity(mb.link(j.link_id).expect("link"))[0])
+            .collect()
+    }
+
+    /// Teleports the joints to `q` with zero velocity (like PyBullet's resetJointState), and sets
+    /// the position targets to match so the motors hold it.
+    pub fn set_joint_positions(
+        &mut self,
+        q: &[f32],
+        bodies: &mut RigidBodySet,
+        set: &mut MultibodyJointSet,
+    ) -> Result<()> {
+        self.check_len(q, "joint positions")?;
+        let current = self.joint_positions(set);
+        let mb = self.multibody_mut(set);
+        let mut disp = vec![0.0; mb.ndofs()];
+        for (j, joint) in self.joints.iter().enumerate() {
+            let dof = mb.link(joint.link_id).expect("link").assembly_id();
+            disp[dof] = q[j] - current[j];
+        }
+        mb.apply_displacements(&disp);
+        mb.generalized_velocity_mut().fill(0.0);
+        mb.forward_kinematics(bodies, true);
+        mb.update_rigid_bodies(bodies, true);
+        for &b in &self.bodies {
+            if let Some(rb) = bodies.get_mut(b) {
+                rb.set_linvel(Vector::ZERO, true);
+                rb.set_angvel(Vector::ZERO, true);
+            }
+        }
+        self.targets.copy_from_slice(q);
+        self.apply_motors(set);
+        Ok(())
+    }
+
+    fn check_len(&self, values: &[f32], what: &str) -> Result<()> {
+        if values.len() != self.joints.len() {
+            return Err(SimError::Command(format!(
+                "{what}: expected {} values (joints {}), got {}",
+                self.joints.len(),
+                self.joints
+                    .iter()
+                    .map(|j| j.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                values.len()
+            )));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(SimError::Command(format!(
+                "{what}: value for joint '{}' is {}",
+                self.joints[i].name, values[i]
+            )));
+        }
+        Ok(())
+    }
+
+    /// Sets the same PD gains on every joint.
+    pub fn set_gains_all(&mut self, gains: PdGains) {
+        self.gains.fill(gains);
+    }
+
+    /// Sets PD gains of one joint.
+    pub fn set_gains(&mut self, joint: usize, gains: PdGains) -> Result<()> {
+        if !(gains.kp.is_finite() && gains.kd.is_finite() && gains.kp >= 0.0 && gains.kd >= 0.0) {
+            return Err(SimError::Command(format!(
+                "gains must be finite and non-negative, got {gains:?}"
+            )));
+        }
+        *self
+            .gains
+            .get_mut(joint)
+            .ok_or_else(|| SimError::Command(format!("no joint {joint}")))? = gains;
+        Ok(())
+    }
+
+    /// Changes a joint's effort limit (N·m or N), e.g. the gripper's squeezing force.
+    pub fn set_effort_limit(&mut self, joint: usize, effort: f32) -> Result<()> {
+        if !(effort.is_finite() && effort > 0.0) {
+            return Err(SimError::Command(format!("effort limit must be positive, got {effort}")));
+        }
+        self.joints
+            .get_mut(joint)
+            .ok_or_else(|| SimError::Command(format!("no joint {joint}")))?
+            .effort = effort;
+        Ok(())
+    }
+
+    /// Current position targets.
+    pub fn position_targets(&self) -> &[f32] {
+        &self.targets
+    }
+
+    /// Position control: targets clamped to the joint limits, tracked by the PD motors.
+    /// Targets of mimic joints are ignored (the coupling drives them).
+    pub fn set_position_targets(&mut self, q: &[f32], set: &mut MultibodyJointSet) -> Result<()> {
+        self.check_len(q, "position targets")?;
+        for (t, (v, j)) in self.targets.iter_mut().zip(q.iter().zip(&self.joints)) {
+            *t = v.clamp(j.limits.0, j.limits.1);
+        }
+        self.mode = DriveMode::Position;
+        self.apply_motors(set);
+        Ok(())
+    }
+
+    /// Position target of one joint.
+    pub fn set_position_target(
+        &mut self,
+        joint: usize,
+        q: f32,
+        set: &mut MultibodyJointSet,
+    ) -> Result<()> {
+        let mut targets = self.targets.clone();
+        *targets
+            .get_mut(joint)
+            .ok_or_else(|| SimError::Command(format!("no joint {joint}")))? = q;
+        self.set_position_targets(&targets, set)
+    }
+
+    /// Torque control: motors off, `tau` (clamped to effort limits) applied every physics step.
+    pub fn set_torques(&mut self, tau: &[f32], set: &mut MultibodyJointSet) -> Result<()> {
+        self.check_len(tau, "torques")?;
+        let clamped = tau
+            .iter()
+            .zip(&self.joints)
+            .map(|(t, j)| t.clamp(-j.effort, j.effort))
+            .collect();
+        self.mode = DriveMode::Torque(clamped);
+        self.apply_motors(set);
+        Ok(())
+    }
+
+    fn apply_motors(&self, set: &mut MultibodyJointSet) {
+        let torque_mode = matches!(self.mode, DriveMode::Torque(_));
+        let mb = self.multibody_mut(set);
+        for (j, joint) in self.joints.iter().enumerate() {
+            let link = mb.link_mut(joint.link_id).expect("link");
+            let (kp, kd) = if torque_mode || joint.mimic.is_some() {
+                (0.0, 0.0)
+            } else {
+                (self.gains[j].kp, self.gains[j].kd)
+            };
+            link.joint
+                .data
+                .set_motor(joint.axis(), self.targets[j], 0.0, kp, kd);
+            link.joint
+                .data
+                .set_motor_max_force(joint.axis(), if kp == 0.0 && kd == 0.0 { 0.0 } else { joint.effort });
+        }
+    }
+
+    /// Applies this step's joint torques as equal and opposite body torques/forces on the two
+    /// links of each joint (called by the scene before every physics step in torque mode).
+    pub(crate) fn apply_joint_torques(&self, bodies: &mut RigidBodySet, set: &MultibodyJointSet) {
+        let DriveMode::Torque(tau) = &self.mode else {
+            return;
+        };
+        let mb = self.multibody(set);
+        for (joint, &t) in self.joints.iter().zip(tau) {
+            if t == 0.0 {
+                continue;
+            }
+            let link = mb.link(joint.link_id).expect("link");
+            let parent = mb.link(link.parent_id().unwrap_or(0)).expect("parent");
+            let frame1 = link.joint.data.local_frame1;
+            let parent_pose = *bodies[parent.rigid_body_handle()].position();
+            let axis_world = (parent_pose * frame1).rotation * Vector::X;
+            let (child_h, parent_h) = (link.rigid_body_handle(), parent.rigid_body_handle());
+            match joint.kind {
+                JointKind::Prismatic => {
+                    let point = (parent_pose * frame1).translation;
+                    bodies[child_h].add_force_at_point(axis_world * t, point, true);
+                    bodies[parent_h].add_force_at_point(-axis_world * t, point, true);
+                }
+                _ => {
+                    bodies[child_h].add_torque(axis_world * t, true);
+                    bodies[parent_h].add_torque(-axis_world * t, true);
+                }
+            }
+        }
+    }
+
+    /// Clears the forces added by [`Self::apply_joint_torques`].
+    pub(crate) fn clear_joint_torques(&self, bodies: &mut RigidBodySet) {
+        if matches!(self.mode, DriveMode::Torque(_)) {
+            for &b in &self.bodies {
+                bodies[b].reset_forces(false);
+                bodies[b].reset_torques(false);
+            }
+        }
+    }
+
+    /// World pose of a link (merged links included), like PyBullet's getLinkState.
+    pub fn link_pose(&self, bodies: &RigidBodySet, link: &str) -> Option<Isometry3<f64>> {
+        let l = self.model.link_index(link)?;
+        let (b, offset) = self.link_frames[l];
+        Some(pose_to_iso(&(bodies[self.bodies[b]].position() * offset)))
+    }
+
+    /// Linear and angular velocity of a link frame's origin in the world.
+    pub fn link_velocity(&self, bodies: &RigidBodySet, link: &str) -> Option<([f64; 3], [f64; 3])> {
+        let l = self.model.link_index(link)?;
+        let (b, offset) = self.link_frames[l];
+        let body = &bodies[self.bodies[b]];
+        let point = (body.position() * offset).translation;
+        let v = body.velocity_at_point(point);
+        let w = body.angvel();
+        Some((
+            [v.x as f64, v.y as f64, v.z as f64],
+            [w.x as f64, w.y as f64, w.z as f64],
+        ))
+    }
+
+    /// The body (handle) carrying a link.
+    pub fn link_body(&self, link: &str) -> Option<RigidBodyHandle> {
+        let l = self.model.link_index(link)?;
+        Some(self.bodies[self.link_frames[l].0])
+    }
+}
