@@ -132,8 +132,36 @@ impl SerialChain {
     /// Damped-least-squares IK from `seed`, staying within joint limits.
     ///
     /// Returns the joint vector whose tool pose is within `tolerance` (metres; radians for the
-    /// orientation) of `target`, or an error with the residual.
+    /// orientation) of `target`, or an error with the residual. When the search from `seed` gets
+    /// stuck against a limit, it restarts with the last joint (the tool roll) turned by ±π/2 and
+    /// ±π, which is where a local solver usually goes wrong on a six-axis arm.
     pub fn inverse(
+        &self,
+        target: &Isometry3<f64>,
+        seed: &[f64],
+        tolerance: f64,
+    ) -> Result<Vec<f64>> {
+        let first = self.inverse_from(target, seed, tolerance);
+        if first.is_ok() || seed.is_empty() {
+            return first;
+        }
+        let last = seed.len() - 1;
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        for shift in [half_pi, -half_pi, 2.0 * half_pi, -2.0 * half_pi] {
+            let mut restart = seed.to_vec();
+            restart[last] += shift;
+            let (lo, hi) = self.limits[last];
+            if restart[last] < lo || restart[last] > hi {
+                continue;
+            }
+            if let Ok(q) = self.inverse_from(target, &restart, tolerance) {
+                return Ok(q);
+            }
+        }
+        first
+    }
+
+    fn inverse_from(
         &self,
         target: &Isometry3<f64>,
         seed: &[f64],

@@ -168,9 +168,9 @@ impl Default for ArmConfig {
             package_paths: Vec::new(),
             flange_link: "tool0".into(),
             base_xyz: [0.0, 0.0, 0.75],
-            base_yaw: std::f32::consts::PI,
+            base_yaw: 0.0,
             // Flange pointing down, about 30 cm above the middle of the placement area.
-            home: vec![0.0, -1.9, -1.6, -1.2, 1.5708, 0.0],
+            home: vec![0.2056, -1.5709, -1.7669, -1.3746, 1.5708, -1.3651],
             kp: 8_000.0,
             kd: 400.0,
             armature: 0.1,
@@ -313,6 +313,8 @@ pub struct Scene {
     object_collider: ColliderHandle,
     table_top: f32,
     home: Snapshot,
+    /// TCP pose at the home joint vector.
+    home_tcp: Isometry3<f64>,
     time: f64,
 }
 
@@ -486,6 +488,7 @@ impl Scene {
             object,
             object_collider,
             table_top,
+            home_tcp: Isometry3::identity(),
             time: 0.0,
             config,
         };
@@ -496,6 +499,7 @@ impl Scene {
         scene.step_physics()?;
         scene.time = 0.0;
         scene.home = scene.snapshot();
+        scene.home_tcp = scene.tcp_pose();
         Ok(scene)
     }
 
@@ -851,6 +855,25 @@ impl Scene {
         Isometry3::from_parts(Translation3::from(position), rotation)
     }
 
+    /// The TCP yaw that grasps a cube of orientation `object` across two opposite faces, chosen
+    /// among the four symmetric ones as the nearest to the home TCP yaw (least wrist travel).
+    pub fn grasp_yaw(&self, object: &UnitQuaternion<f64>) -> f64 {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let reference = yaw_of(&self.home_tcp.rotation);
+        let object_yaw = yaw_of(object);
+        let mut best = object_yaw;
+        let mut best_gap = f64::INFINITY;
+        for k in -4..=4 {
+            let candidate = object_yaw + k as f64 * FRAC_PI_2;
+            let gap = (candidate - reference + PI).rem_euclid(2.0 * PI) - PI;
+            if gap.abs() < best_gap {
+                best_gap = gap.abs();
+                best = reference + gap;
+            }
+        }
+        best
+    }
+
     // ── Reset ──────────────────────────────────────────────────────────────
 
     /// Restores the home state and places the object at random (uniform in the placement area,
@@ -893,7 +916,7 @@ impl Scene {
     /// Reachable from above (pre-grasp and grasp poses solve) and clear of the robot.
     fn placement_is_valid(&self, pose: &Isometry3<f64>, seed: &[f32]) -> bool {
         let centre = pose.translation.vector;
-        let yaw = yaw_of(&pose.rotation);
+        let yaw = self.grasp_yaw(&pose.rotation);
         for lift in [0.0, 0.15] {
             let target = self.top_down_pose(centre + Vector3::new(0.0, 0.0, lift), yaw);
             if self.solve_ik(&target, seed).is_err() {
