@@ -1,1 +1,123 @@
-fn main() {}
+//! `fairgrasp`: the command-line face of the project. Thin: every command parses its arguments,
+//! calls the library crates and prints.
+
+mod bench;
+mod demo;
+mod inspect;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use fairgrasp_sim::scene::SceneConfig;
+use std::path::{Path, PathBuf};
+
+#[derive(Parser)]
+#[command(
+    name = "fairgrasp",
+    version,
+    about = "Teach a FAIRINO arm to grasp: simulation, learning, deployment"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print a robot description's joints, chain and flange pose (like PyBullet's getJointInfo).
+    Inspect(inspect::InspectArgs),
+    /// Run a demonstration in simulation.
+    #[command(subcommand)]
+    Demo(demo::DemoCommand),
+    /// Measure simulator throughput.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+/// Scene settings shared by the commands that build a scene.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SceneArgs {
+    /// TOML file with scene settings (sections: physics, table, object, placement, gripper, arm).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Physics rate in Hz (overrides the config; 240 by default).
+    #[arg(long)]
+    pub physics_hz: Option<f32>,
+    /// Physics steps per control step (overrides the config).
+    #[arg(long)]
+    pub substeps: Option<u32>,
+    /// Arm URDF to use instead of the bundled FR5.
+    #[arg(long)]
+    pub urdf: Option<PathBuf>,
+    /// Directories searched for `package://` meshes (also: ROS_PACKAGE_PATH).
+    #[arg(long = "package-path")]
+    pub package_paths: Vec<PathBuf>,
+}
+
+impl SceneArgs {
+    /// The scene configuration: defaults, then the TOML file, then flags.
+    pub fn scene_config(&self) -> Result<SceneConfig> {
+        let mut config = match &self.config {
+            Some(path) => load_scene_config(path)?,
+            None => SceneConfig::default(),
+        };
+        if let Some(hz) = self.physics_hz {
+            anyhow::ensure!(
+                hz.is_finite() && hz > 0.0,
+                "--physics-hz must be positive, got {hz}"
+            );
+            // Keep the control period when only the physics rate changes.
+            let period = config.physics.dt * config.physics.substeps as f32;
+            config.physics.dt = 1.0 / hz;
+            if self.substeps.is_none() {
+                config.physics.substeps = (period * hz).round().max(1.0) as u32;
+            }
+        }
+        if let Some(k) = self.substeps {
+            config.physics.substeps = k;
+        }
+        if let Some(urdf) = &self.urdf {
+            config.arm.urdf = Some(urdf.clone());
+        }
+        config
+            .arm
+            .package_paths
+            .extend(self.package_paths.iter().cloned());
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+/// Reads a scene TOML file; unknown keys and bad values are errors naming the key.
+pub fn load_scene_config(path: &Path) -> Result<SceneConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read config {}", path.display()))?;
+    let config: SceneConfig =
+        toml::from_str(&text).with_context(|| format!("invalid config {}", path.display()))?;
+    config
+        .validate()
+        .with_context(|| format!("invalid config {}", path.display()))?;
+    Ok(config)
+}
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Inspect(args) => inspect::run(&args),
+        Command::Demo(command) => demo::run(command),
+        Command::Bench(command) => bench::run(command),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,13 +1,45 @@
 use fairgrasp_sim::pick::*;
+use fairgrasp_sim::rapier3d::na::Point3;
 use fairgrasp_sim::scene::{Scene, SceneConfig};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let mut config = SceneConfig::default();
-    if args.len() > 1 { config.physics.dt = 1.0 / args[1].parse::<f32>().unwrap(); config.physics.substeps = (config.physics.substeps as f32 * config.physics.dt.recip() / 240.0) as u32; }
+    config.physics.solver_iterations = args[1].parse().unwrap();
+    config.physics.pgs_iterations = args[2].parse().unwrap();
+    config.gripper.force_limit = args[3].parse().unwrap();
+    let motion: f32 = args[4].parse().unwrap();
+    config.physics.contact_frequency = args[5].parse().unwrap();
+    config.gripper.pad_friction = args[6].parse().unwrap();
     let mut scene = Scene::new(config).unwrap();
-    let t = std::time::Instant::now();
-    let report = evaluate_scripted_pick(&mut scene, 20, 0, &PickScript::default(), SuccessRule::default(), |seed, o| {
-        println!("seed {seed} success {} drift {:.4} lift {:.3}", o.success, o.hold_drift, o.final_lift);
-    }).unwrap();
-    println!("{}/{} max drift {:.4} mean {:.4} failures {:?} in {:?}", report.successes, report.episodes, report.max_drift, report.mean_drift, report.failures, t.elapsed());
+    scene.reset(8).unwrap();
+    grasp_and_lift(&mut scene, &PickScript::default(), &mut |s| {
+        s.step_control()
+    })
+    .unwrap();
+    let relative = |scene: &Scene| {
+        let tcp = scene.tcp_pose();
+        tcp.inverse_transform_point(&Point3::from(scene.object_state().pose.translation.vector))
+            .coords
+    };
+    let start = relative(&scene);
+    let hold = scene.arm_targets();
+    let steps = (30.0 / scene.control_period()).ceil() as usize;
+    for i in 0..steps {
+        let t = i as f32 * scene.control_period();
+        let mut q = hold.clone();
+        q[0] += motion * 0.4 * (0.5 * t).sin();
+        q[5] += motion * 0.5 * (0.7 * t).sin();
+        scene.set_arm_targets(&q).unwrap();
+        scene.step_control().unwrap();
+        if i % 150 == 0 {
+            let d = relative(&scene) - start;
+            println!(
+                "t={t:.1} drift {:.4} {:.4} {:.4} open {:.4}",
+                d.x,
+                d.y,
+                d.z,
+                scene.gripper_opening()
+            );
+        }
+    }
 }

@@ -22,7 +22,12 @@ pub fn fr5_urdf_path() -> PathBuf {
 
 /// The bundled FR5 model.
 pub fn fr5() -> Result<RobotModel> {
-    RobotModel::from_urdf_str(FR5_URDF, "bundled fr5.urdf", Path::new(""), &LoadOptions::default())
+    RobotModel::from_urdf_str(
+        FR5_URDF,
+        "bundled fr5.urdf",
+        Path::new(""),
+        &LoadOptions::default(),
+    )
 }
 
 /// The bundled gripper model.

@@ -147,19 +147,52 @@ fn smooth(s: f64) -> f64 {
     s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
 }
 
-/// Runs the scripted pick on a freshly reset scene.
-pub fn run_scripted_pick(scene: &mut Scene, script: &PickScript, rule: SuccessRule) -> Result<PickOutcome> {
-    let period = scene.control_period() as f64;
+/// Runs the scripted pick on a freshly reset scene: approach, descend, close, lift, hold.
+pub fn run_scripted_pick(
+    scene: &mut Scene,
+    script: &PickScript,
+    rule: SuccessRule,
+) -> Result<PickOutcome> {
     let mut tracker = SuccessTracker::new(rule);
     let mut success = false;
     let mut steps = 0u32;
-    let mut step = |scene: &mut Scene, tracker: &mut SuccessTracker| -> Result<()> {
+    let mut step = |scene: &mut Scene| -> Result<()> {
         scene.step_control()?;
         steps += 1;
         success |= tracker.update(&GraspStatus::of(scene));
         Ok(())
     };
+    grasp_and_lift(scene, script, &mut step)?;
 
+    // Hold, measuring the object's drift relative to the TCP.
+    let relative = |scene: &Scene| {
+        let tcp = scene.tcp_pose();
+        let p = scene.object_state().pose.translation.vector;
+        tcp.inverse_transform_point(&Point3::from(p)).coords
+    };
+    let at_hold = relative(scene);
+    let mut hold_drift: f64 = 0.0;
+    let period = scene.control_period() as f64;
+    for _ in 0..(script.hold_time / period).ceil() as u32 {
+        step(scene)?;
+        hold_drift = hold_drift.max((relative(scene) - at_hold).norm());
+    }
+    let final_lift = scene.object_state().pose.translation.z - scene.object_rest_height();
+    Ok(PickOutcome {
+        success,
+        hold_drift,
+        final_lift,
+        steps,
+    })
+}
+
+/// The script up to the end of the lift; `step` advances one control period.
+pub fn grasp_and_lift(
+    scene: &mut Scene,
+    script: &PickScript,
+    step: &mut dyn FnMut(&mut Scene) -> Result<()>,
+) -> Result<()> {
+    let period = scene.control_period() as f64;
     let object = scene.object_state().pose;
     let centre = object.translation.vector;
     let yaw = scene.grasp_yaw(&object.rotation);
@@ -173,19 +206,23 @@ pub fn run_scripted_pick(scene: &mut Scene, script: &PickScript, rule: SuccessRu
     let n = (script.approach_time / period).ceil() as u32;
     for i in 1..=n {
         let s = smooth(i as f64 / n as f64) as f32;
-        let q: Vec<f32> = start.iter().zip(&q_pre).map(|(a, b)| a + (b - a) * s).collect();
+        let q: Vec<f32> = start
+            .iter()
+            .zip(&q_pre)
+            .map(|(a, b)| a + (b - a) * s)
+            .collect();
         scene.set_arm_targets(&q)?;
-        step(scene, &mut tracker)?;
+        step(scene)?;
     }
 
     // 2. Descend in a straight line.
     let mut seed = q_pre;
-    cartesian_move(scene, &pre, &grasp, script.descend_time, &mut seed, &mut |s| step(s, &mut tracker))?;
+    cartesian_move(scene, &pre, &grasp, script.descend_time, &mut seed, step)?;
 
     // 3. Close.
     scene.set_gripper_open(false)?;
     for _ in 0..(script.close_time / period).ceil() as u32 {
-        step(scene, &mut tracker)?;
+        step(scene)?;
     }
 
     // 4. Lift.
@@ -193,27 +230,7 @@ pub fn run_scripted_pick(scene: &mut Scene, script: &PickScript, rule: SuccessRu
         (grasp.translation.vector + Vector3::new(0.0, 0.0, script.lift_height)).into(),
         grasp.rotation,
     );
-    cartesian_move(scene, &grasp, &lifted, script.lift_time, &mut seed, &mut |s| step(s, &mut tracker))?;
-
-    // 5. Hold, measuring the object's drift relative to the TCP.
-    let relative = |scene: &Scene| {
-        let tcp = scene.tcp_pose();
-        let p = scene.object_state().pose.translation.vector;
-        tcp.inverse_transform_point(&Point3::from(p)).coords
-    };
-    let at_hold = relative(scene);
-    let mut hold_drift: f64 = 0.0;
-    for _ in 0..(script.hold_time / period).ceil() as u32 {
-        step(scene, &mut tracker)?;
-        hold_drift = hold_drift.max((relative(scene) - at_hold).norm());
-    }
-    let final_lift = scene.object_state().pose.translation.z - scene.object_rest_height();
-    Ok(PickOutcome {
-        success,
-        hold_drift,
-        final_lift,
-        steps,
-    })
+    cartesian_move(scene, &grasp, &lifted, script.lift_time, &mut seed, step)
 }
 
 /// Moves the TCP along a straight line from `from` to `to`, solving IK at every control step.

@@ -178,8 +178,10 @@ impl Robot {
             let (parent_body, parent_offset) =
                 link_frames[joint.parent].expect("joints are sorted root to leaves");
             if joint.kind == JointKind::Fixed {
-                link_frames[joint.child] =
-                    Some((parent_body, parent_offset * origin_to_isometry(&joint.origin)));
+                link_frames[joint.child] = Some((
+                    parent_body,
+                    parent_offset * origin_to_isometry(&joint.origin),
+                ));
             } else {
                 link_frames[joint.child] = Some((body_links.len(), Isometry3::identity()));
                 body_links.push(joint.child);
@@ -242,9 +244,12 @@ impl Robot {
                 .get(&link.name)
                 .copied()
                 .unwrap_or(options.friction);
-            for (k, Shape {
-                origin, geometry, ..
-            }) in link.collisions.iter().enumerate()
+            for (
+                k,
+                Shape {
+                    origin, geometry, ..
+                },
+            ) in link.collisions.iter().enumerate()
             {
                 let (shape, adjust) =
                     shape_of(geometry, options.mesh_collision).ok_or_else(|| {
@@ -275,7 +280,11 @@ impl Robot {
             }
             let (parent_body, parent_offset) = link_frames[joint.parent];
             let (child_body, _) = link_frames[joint.child];
-            let axis = Vector::new(joint.axis[0] as f32, joint.axis[1] as f32, joint.axis[2] as f32);
+            let axis = Vector::new(
+                joint.axis[0] as f32,
+                joint.axis[1] as f32,
+                joint.axis[2] as f32,
+            );
             // rapier's free axis is the joint frame's x: rotate x onto the URDF axis.
             let basis = Pose::from_rotation(GenericJoint::complete_ang_frame(axis));
             let frame1 = iso_to_pose(&(parent_offset * origin_to_isometry(&joint.origin))) * basis;
@@ -306,7 +315,12 @@ impl Robot {
                 builder = builder.limits(rj.axis(), [rj.limits.0, rj.limits.1]);
             }
             let handle = multibody_joints
-                .insert(handles[parent_body], handles[child_body], builder.build(), true)
+                .insert(
+                    handles[parent_body],
+                    handles[child_body],
+                    builder.build(),
+                    true,
+                )
                 .ok_or_else(|| {
                     SimError::urdf(
                         &model.source_name,
@@ -512,7 +526,9 @@ impl Robot {
     /// Changes a joint's effort limit (N·m or N), e.g. the gripper's squeezing force.
     pub fn set_effort_limit(&mut self, joint: usize, effort: f32) -> Result<()> {
         if !(effort.is_finite() && effort > 0.0) {
-            return Err(SimError::Command(format!("effort limit must be positive, got {effort}")));
+            return Err(SimError::Command(format!(
+                "effort limit must be positive, got {effort}"
+            )));
         }
         self.joints
             .get_mut(joint)
@@ -578,9 +594,14 @@ impl Robot {
             link.joint
                 .data
                 .set_motor(joint.axis(), self.targets[j], 0.0, kp, kd);
-            link.joint
-                .data
-                .set_motor_max_force(joint.axis(), if kp == 0.0 && kd == 0.0 { 0.0 } else { joint.effort });
+            link.joint.data.set_motor_max_force(
+                joint.axis(),
+                if kp == 0.0 && kd == 0.0 {
+                    0.0
+                } else {
+                    joint.effort
+                },
+            );
         }
     }
 

@@ -27,8 +27,12 @@ pub struct PhysicsConfig {
     pub dt: f32,
     /// Physics steps per control step (the control period is `dt × substeps`).
     pub substeps: u32,
-    /// Constraint solver iterations per step.
+    /// Solver iterations (substeps) per physics step. Each one re-assembles the arm's
+    /// joint-space mass matrix, the largest cost of a step.
     pub solver_iterations: usize,
+    /// Gauss-Seidel sweeps inside each solver iteration: they tighten contacts and joints
+    /// without the mass-matrix cost of another substep.
+    pub pgs_iterations: usize,
     /// Contact stiffness as a natural frequency (Hz). rapier's default (30 Hz) lets a hard-squeezed
     /// light cube sink centimetres into the pads; 300 Hz keeps penetration under a millimetre.
     pub contact_frequency: f32,
@@ -41,6 +45,7 @@ impl Default for PhysicsConfig {
             dt: 1.0 / 240.0,
             substeps: 8,
             solver_iterations: 4,
+            pgs_iterations: 1,
             contact_frequency: 300.0,
             gravity: 9.81,
         }
@@ -200,7 +205,10 @@ impl SceneConfig {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(SimError::config(key, format!("must be a positive number, got {v}")))
+                Err(SimError::config(
+                    key,
+                    format!("must be a positive number, got {v}"),
+                ))
             }
         };
         positive("physics.dt", p.dt)?;
@@ -214,7 +222,16 @@ impl SceneConfig {
             return Err(SimError::config("physics.substeps", "must be at least 1"));
         }
         if p.solver_iterations == 0 || p.solver_iterations > 100 {
-            return Err(SimError::config("physics.solver_iterations", "must be in 1..=100"));
+            return Err(SimError::config(
+                "physics.solver_iterations",
+                "must be in 1..=100",
+            ));
+        }
+        if p.pgs_iterations == 0 || p.pgs_iterations > 100 {
+            return Err(SimError::config(
+                "physics.pgs_iterations",
+                "must be in 1..=100",
+            ));
         }
         positive("physics.contact_frequency", p.contact_frequency)?;
         if !p.gravity.is_finite() {
@@ -223,23 +240,37 @@ impl SceneConfig {
         positive("table.size[0]", self.table.size[0])?;
         positive("table.size[1]", self.table.size[1])?;
         if !self.table.height.is_finite() || self.table.height < 0.0 {
-            return Err(SimError::config("table.height", "must be a non-negative number"));
+            return Err(SimError::config(
+                "table.height",
+                "must be a non-negative number",
+            ));
         }
         positive("table.friction", self.table.friction)?;
         positive("object.size", self.object.size)?;
         if self.object.size > 0.085 {
             return Err(SimError::config(
                 "object.size",
-                format!("{} m does not fit the 90 mm gripper opening", self.object.size),
+                format!(
+                    "{} m does not fit the 90 mm gripper opening",
+                    self.object.size
+                ),
             ));
         }
         positive("object.mass", self.object.mass)?;
         positive("object.friction", self.object.friction)?;
-        if !(self.placement.size.iter().all(|v| v.is_finite() && *v >= 0.0)) {
+        if !(self
+            .placement
+            .size
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0))
+        {
             return Err(SimError::config("placement.size", "must be non-negative"));
         }
         if !self.placement.yaw_range.is_finite() || self.placement.yaw_range < 0.0 {
-            return Err(SimError::config("placement.yaw_range", "must be non-negative"));
+            return Err(SimError::config(
+                "placement.yaw_range",
+                "must be non-negative",
+            ));
         }
         positive("gripper.force_limit", self.gripper.force_limit)?;
         positive("gripper.pad_friction", self.gripper.pad_friction)?;
@@ -389,7 +420,11 @@ impl Scene {
         if config.arm.home.len() != arm.len() {
             return Err(SimError::config(
                 "arm.home",
-                format!("has {} values, the arm has {} joints", config.arm.home.len(), arm.len()),
+                format!(
+                    "has {} values, the arm has {} joints",
+                    config.arm.home.len(),
+                    arm.len()
+                ),
             ));
         }
         let finger_bodies = [
@@ -419,7 +454,11 @@ impl Scene {
         let thickness = 0.05;
         let table = world.bodies.insert(
             RigidBodyBuilder::fixed()
-                .translation(Vector::new(t.center[0], t.center[1], t.height - thickness / 2.0))
+                .translation(Vector::new(
+                    t.center[0],
+                    t.center[1],
+                    t.height - thickness / 2.0,
+                ))
                 .build(),
         );
         world.colliders.insert_with_parent(
@@ -439,7 +478,11 @@ impl Scene {
         let o = &config.object;
         let object = world.bodies.insert(
             RigidBodyBuilder::dynamic()
-                .translation(Vector::new(t.center[0], t.center[1], t.height + o.size / 2.0))
+                .translation(Vector::new(
+                    t.center[0],
+                    t.center[1],
+                    t.height + o.size / 2.0,
+                ))
                 .can_sleep(false)
                 .build(),
         );
@@ -461,6 +504,7 @@ impl Scene {
         let mut params = IntegrationParameters {
             dt: config.physics.dt,
             num_solver_iterations: config.physics.solver_iterations,
+            num_internal_pgs_iterations: config.physics.pgs_iterations,
             ..IntegrationParameters::default()
         };
         params.contact_softness.natural_frequency = config.physics.contact_frequency;
@@ -609,12 +653,18 @@ impl Scene {
 
     /// Names of the arm joints, base to flange.
     pub fn arm_joint_names(&self) -> Vec<&str> {
-        self.arm.iter().map(|&j| self.robot.joints[j].name.as_str()).collect()
+        self.arm
+            .iter()
+            .map(|&j| self.robot.joints[j].name.as_str())
+            .collect()
     }
 
     /// `(lower, upper)` limits of the arm joints.
     pub fn arm_limits(&self) -> Vec<(f32, f32)> {
-        self.arm.iter().map(|&j| self.robot.joints[j].limits).collect()
+        self.arm
+            .iter()
+            .map(|&j| self.robot.joints[j].limits)
+            .collect()
     }
 
     /// Arm joint angles (rad).
@@ -631,7 +681,10 @@ impl Scene {
 
     /// Current arm position targets (rad).
     pub fn arm_targets(&self) -> Vec<f32> {
-        self.arm.iter().map(|&j| self.robot.position_targets()[j]).collect()
+        self.arm
+            .iter()
+            .map(|&j| self.robot.position_targets()[j])
+            .collect()
     }
 
     fn full_vector(&self, arm_values: &[f32], finger: f32) -> Result<Vec<f32>> {
@@ -654,8 +707,11 @@ impl Scene {
     pub fn set_arm_positions(&mut self, q: &[f32]) -> Result<()> {
         let finger = self.robot.joint_positions(&self.world.multibody_joints)[self.finger];
         let full = self.full_vector(q, finger)?;
-        self.robot
-            .set_joint_positions(&full, &mut self.world.bodies, &mut self.world.multibody_joints)
+        self.robot.set_joint_positions(
+            &full,
+            &mut self.world.bodies,
+            &mut self.world.multibody_joints,
+        )
     }
 
     /// Position control of the arm: PD targets (rad), clamped to the joint limits.
@@ -680,7 +736,8 @@ impl Scene {
         for (&j, &t) in self.arm.iter().zip(tau) {
             full[j] = t;
         }
-        self.robot.set_torques(&full, &mut self.world.multibody_joints)
+        self.robot
+            .set_torques(&full, &mut self.world.multibody_joints)
     }
 
     // ── Gripper ────────────────────────────────────────────────────────────
@@ -784,7 +841,8 @@ impl Scene {
 
     /// Pose of the gripper's centre point between the pads.
     pub fn tcp_pose(&self) -> Isometry3<f64> {
-        self.link_pose(TCP_LINK).expect("the gripper has a tcp frame")
+        self.link_pose(TCP_LINK)
+            .expect("the gripper has a tcp frame")
     }
 
     /// Pose of the arm flange.
@@ -894,11 +952,16 @@ impl Scene {
             let local_x = p.center[0] + (rng.random::<f32>() - 0.5) * p.size[0];
             let local_y = p.center[1] + (rng.random::<f32>() - 0.5) * p.size[1];
             let yaw = (rng.random::<f32>() * 2.0 - 1.0) * p.yaw_range;
-            let world_xy = self.base * rapier3d::na::Point3::new(local_x as f64, local_y as f64, 0.0);
+            let world_xy =
+                self.base * rapier3d::na::Point3::new(local_x as f64, local_y as f64, 0.0);
             let position = Vector3::new(world_xy.x, world_xy.y, self.object_rest_height() + 0.001);
             let pose = Isometry3::from_parts(
                 Translation3::from(position),
-                UnitQuaternion::from_euler_angles(0.0, 0.0, yaw as f64 + yaw_of(&self.base.rotation)),
+                UnitQuaternion::from_euler_angles(
+                    0.0,
+                    0.0,
+                    yaw as f64 + yaw_of(&self.base.rotation),
+                ),
             );
             if self.placement_is_valid(&pose, &home_q) {
                 self.set_object_pose(&pose);

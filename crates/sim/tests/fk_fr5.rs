@@ -32,7 +32,12 @@ fn model_flange_matches_reference_figures() {
     assert_eq!(chain.joint_names, ["j1", "j2", "j3", "j4", "j5", "j6"]);
     for (q, expected) in CHECKS {
         let p = chain.forward(&q).translation.vector;
-        assert_close_mm([p.x, p.y, p.z], expected, 1e-3, &format!("model FK at {q:?}"));
+        assert_close_mm(
+            [p.x, p.y, p.z],
+            expected,
+            1e-3,
+            &format!("model FK at {q:?}"),
+        );
     }
 }
 
@@ -40,16 +45,35 @@ fn model_flange_matches_reference_figures() {
 fn dh_flange(q: &[f64; 6]) -> [f64; 3] {
     let d = [0.152, 0.0, 0.0, 0.102, 0.102, 0.100];
     let a = [0.0, -0.425, -0.395, 0.0, 0.0, 0.0];
-    let alpha = [std::f64::consts::FRAC_PI_2, 0.0, 0.0, std::f64::consts::FRAC_PI_2, -std::f64::consts::FRAC_PI_2, 0.0];
+    let alpha = [
+        std::f64::consts::FRAC_PI_2,
+        0.0,
+        0.0,
+        std::f64::consts::FRAC_PI_2,
+        -std::f64::consts::FRAC_PI_2,
+        0.0,
+    ];
     let mut t = rapier3d::na::Matrix4::<f64>::identity();
     for i in 0..6 {
         let (ct, st) = (q[i].cos(), q[i].sin());
         let (ca, sa) = (alpha[i].cos(), alpha[i].sin());
         let step = rapier3d::na::Matrix4::new(
-            ct, -st * ca, st * sa, a[i] * ct,
-            st, ct * ca, -ct * sa, a[i] * st,
-            0.0, sa, ca, d[i],
-            0.0, 0.0, 0.0, 1.0,
+            ct,
+            -st * ca,
+            st * sa,
+            a[i] * ct,
+            st,
+            ct * ca,
+            -ct * sa,
+            a[i] * st,
+            0.0,
+            sa,
+            ca,
+            d[i],
+            0.0,
+            0.0,
+            0.0,
+            1.0,
         );
         t *= step;
     }
@@ -62,14 +86,28 @@ fn model_agrees_with_dh_table_at_many_joint_vectors() {
     let chain = SerialChain::new(&model, "tool0").unwrap();
     let mut state = 12345u64;
     let mut next = || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((state >> 33) as f64 / (1u64 << 31) as f64) * 2.0 - 1.0
     };
     for _ in 0..50 {
-        let q = [next() * 3.0, next() * 3.0, next() * 2.8, next() * 3.0, next() * 3.0, next() * 3.0];
+        let q = [
+            next() * 3.0,
+            next() * 3.0,
+            next() * 2.8,
+            next() * 3.0,
+            next() * 3.0,
+            next() * 3.0,
+        ];
         let p = chain.forward(&q).translation.vector;
         // The URDF uses the measured 0.39501 m and 0.1021 m, the DH table rounds them.
-        assert_close_mm([p.x, p.y, p.z], dh_flange(&q), 1.5e-3, &format!("DH at {q:?}"));
+        assert_close_mm(
+            [p.x, p.y, p.z],
+            dh_flange(&q),
+            1.5e-3,
+            &format!("DH at {q:?}"),
+        );
     }
 }
 
@@ -82,6 +120,11 @@ fn simulated_flange_matches_reference_figures() {
         scene.set_arm_positions(&q32).unwrap();
         let flange = scene.flange_pose();
         let local = base.inverse_transform_point(&Point3::from(flange.translation.vector));
-        assert_close_mm([local.x, local.y, local.z], expected, 1e-3, &format!("simulated flange at {q:?}"));
+        assert_close_mm(
+            [local.x, local.y, local.z],
+            expected,
+            1e-3,
+            &format!("simulated flange at {q:?}"),
+        );
     }
 }

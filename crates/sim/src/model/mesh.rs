@@ -50,12 +50,40 @@ impl std::str::FromStr for MeshCollision {
 
 /// Reads a mesh file; the error text says what is wrong with it.
 pub(crate) fn load_mesh(path: &Path) -> Result<TriangleMesh, String> {
+    // Choose the parser by extension ourselves: mesh-loader only knows lower- or upper-case
+    // extensions and words its error for other formats poorly.
+    let format = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    if !matches!(format.as_str(), "stl" | "obj" | "dae") {
+        let found = if format.is_empty() {
+            "no file extension".to_string()
+        } else {
+            format!("'.{format}'")
+        };
+        return Err(format!(
+            "{} has an unsupported mesh format ({found}); use STL (.stl), OBJ (.obj) or COLLADA (.dae)",
+            path.display()
+        ));
+    }
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    if bytes.starts_with(b"version https://git-lfs.github.com/spec/") {
+        return Err(format!(
+            "{} is a Git LFS pointer, not the mesh itself; fetch the real file with `git lfs pull`",
+            path.display()
+        ));
+    }
     let loader = mesh_loader::Loader::default().merge_meshes(true);
     // The parsers index into untrusted bytes; a panic there must become an error, not a crash.
-    let parsed = std::panic::catch_unwind(|| loader.load_from_slice(&bytes, path))
-        .map_err(|_| format!("{} is corrupt (the mesh parser failed)", path.display()))?
-        .map_err(|e| format!("{} is not a readable mesh: {e}", path.display()))?;
+    let parsed = std::panic::catch_unwind(|| match format.as_str() {
+        "stl" => loader.load_stl_from_slice(&bytes, path),
+        "obj" => loader.load_obj_from_slice(&bytes, path),
+        _ => loader.load_collada_from_slice(&bytes, path),
+    })
+    .map_err(|_| format!("{} is corrupt (the mesh parser failed)", path.display()))?
+    .map_err(|e| format!("{} is not a readable mesh: {e}", path.display()))?;
     let mut mesh = TriangleMesh::default();
     for part in parsed.meshes {
         let base = mesh.vertices.len() as u32;
@@ -75,8 +103,40 @@ pub(crate) fn load_mesh(path: &Path) -> Result<TriangleMesh, String> {
     if mesh.triangles.is_empty() {
         return Err(format!("{} contains no triangles", path.display()));
     }
+    if format == "stl" {
+        check_binary_stl_count(&bytes, mesh.triangles.len())
+            .map_err(|problem| format!("{} is truncated: {problem}", path.display()))?;
+    }
     if mesh.vertices.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(format!("{} has non-finite vertex coordinates", path.display()));
+        return Err(format!(
+            "{} has non-finite vertex coordinates",
+            path.display()
+        ));
     }
     Ok(mesh)
+}
+
+/// mesh-loader sizes a binary STL by its length and ignores the triangle count in its header, so a
+/// file cut off at a triangle boundary would load with triangles silently missing. Like assimp,
+/// refuse a binary STL whose header declares more triangles than the file holds (a smaller
+/// count, e.g. the 0 some exporters write, is tolerated).
+fn check_binary_stl_count(bytes: &[u8], loaded: usize) -> Result<(), String> {
+    const HEADER: usize = 84;
+    const TRIANGLE: usize = 50;
+    let Some(count) = bytes.get(80..HEADER) else {
+        return Ok(());
+    };
+    let held = (bytes.len() - HEADER) / TRIANGLE;
+    if loaded != held {
+        // Read as ASCII STL: there is no binary count to trust.
+        return Ok(());
+    }
+    let declared = u32::from_le_bytes([count[0], count[1], count[2], count[3]]) as usize;
+    if declared > held {
+        Err(format!(
+            "its binary STL header declares {declared} triangles but the file holds only {held}"
+        ))
+    } else {
+        Ok(())
+    }
 }

@@ -261,7 +261,12 @@ impl RobotModel {
                 ));
             }
         }
-        for joint in child.joints.iter().map(|j| j.name.as_str()).chain([joint_name]) {
+        for joint in child
+            .joints
+            .iter()
+            .map(|j| j.name.as_str())
+            .chain([joint_name])
+        {
             if self.joint_index(joint).is_some() {
                 return Err(SimError::urdf(
                     &child.source_name,

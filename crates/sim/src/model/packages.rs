@@ -77,7 +77,11 @@ pub(crate) fn resolve_uri(
             } else {
                 format!(
                     ": {}",
-                    tried.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+                    tried
+                        .iter()
+                        .map(|p| p.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 )
             }
         ));
@@ -85,7 +89,9 @@ pub(crate) fn resolve_uri(
     let path = match uri.strip_prefix("file://") {
         Some(absolute) => PathBuf::from(absolute),
         None if uri.contains("://") => {
-            return Err(format!("unsupported URI scheme in '{uri}'; use package://, file:// or a path"));
+            return Err(format!(
+                "unsupported URI scheme in '{uri}'; use package://, file:// or a path"
+            ));
         }
         None => base_dir.join(uri),
     };

@@ -27,28 +27,36 @@ pub(super) fn parse_urdf(
     base_dir: &Path,
     options: &LoadOptions,
 ) -> Result<RobotModel> {
-    if source_name.ends_with(".xacro") || text.contains("xmlns:xacro") || text.contains("<xacro:")
-    {
+    if source_name.ends_with(".xacro") || text.contains("xmlns:xacro") || text.contains("<xacro:") {
         return Err(SimError::Xacro {
             path: source_name.to_string(),
         });
     }
     precheck_xml(text, source_name)?;
     let robot = urdf_rs::read_from_string(text).map_err(|e| {
-        SimError::urdf(source_name, "robot", format!("not a valid URDF document: {e}"))
+        SimError::urdf(
+            source_name,
+            "robot",
+            format!("not a valid URDF document: {e}"),
+        )
     })?;
     build_model(&robot, source_name, base_dir, options)
 }
 
-/// Well-formedness and joint types, reported with line and column.
+/// Well-formedness, joint types and numeric attributes, reported with line and column.
 fn precheck_xml(text: &str, source_name: &str) -> Result<()> {
+    if text.trim().is_empty() {
+        return Err(SimError::urdf(source_name, "line 1", "the file is empty"));
+    }
     let doc = roxmltree::Document::parse(text).map_err(|e| {
-        let pos = e.pos();
-        SimError::urdf(
-            source_name,
-            format!("line {}, column {}", pos.row, pos.col),
-            format!("not well-formed XML: {e}"),
-        )
+        let location = match e {
+            // roxmltree gives these no position (it reports 1:1); the problem is at the end.
+            roxmltree::Error::UnexpectedEndOfStream | roxmltree::Error::UnclosedRootNode => {
+                format!("end of file (line {})", text.lines().count().max(1))
+            }
+            _ => format!("line {}, column {}", e.pos().row, e.pos().col),
+        };
+        SimError::urdf(source_name, location, format!("not well-formed XML: {e}"))
     })?;
     let root = doc.root_element();
     if root.tag_name().name() != "robot" {
@@ -60,7 +68,13 @@ fn precheck_xml(text: &str, source_name: &str) -> Result<()> {
     }
     for joint in root.children().filter(|n| n.has_tag_name("joint")) {
         let pos = doc.text_pos_at(joint.range().start);
-        let name = joint.attribute("name").unwrap_or("?");
+        let Some(name) = joint.attribute("name") else {
+            return Err(SimError::urdf(
+                source_name,
+                format!("joint at line {}", pos.row),
+                "missing `name`",
+            ));
+        };
         let location = format!("joint '{name}' (line {})", pos.row);
         match joint.attribute("type") {
             None => return Err(SimError::urdf(source_name, location, "missing `type`")),
@@ -68,7 +82,20 @@ fn precheck_xml(text: &str, source_name: &str) -> Result<()> {
                 return Err(SimError::urdf(
                     source_name,
                     location,
-                    format!("unknown joint type '{t}'; expected one of {}", JOINT_TYPES.join(", ")),
+                    format!(
+                        "unknown joint type '{t}'; expected one of {}",
+                        JOINT_TYPES.join(", ")
+                    ),
+                ));
+            }
+            // urdf-rs would fill in a zero limit, reported later as a confusing "effort 0".
+            Some(t @ ("revolute" | "prismatic"))
+                if !joint.children().any(|c| c.has_tag_name("limit")) =>
+            {
+                return Err(SimError::urdf(
+                    source_name,
+                    location,
+                    format!("a {t} joint needs <limit effort=\"…\" velocity=\"…\"/>"),
                 ));
             }
             Some(_) => {}
@@ -94,6 +121,90 @@ fn precheck_xml(text: &str, source_name: &str) -> Result<()> {
                 format!("link at line {}", pos.row),
                 "missing `name`",
             ));
+        }
+    }
+    check_attributes(&doc, source_name)
+}
+
+/// Attributes urdf-rs reads as numbers: (element, attribute, how many numbers, required).
+/// `0` numbers means any text. urdf-rs reports these without saying where they are.
+const ATTRIBUTES: &[(&str, &str, usize, bool)] = &[
+    ("origin", "xyz", 3, false),
+    ("origin", "rpy", 3, false),
+    ("axis", "xyz", 3, true),
+    ("mass", "value", 1, true),
+    ("inertia", "ixx", 1, true),
+    ("inertia", "ixy", 1, true),
+    ("inertia", "ixz", 1, true),
+    ("inertia", "iyy", 1, true),
+    ("inertia", "iyz", 1, true),
+    ("inertia", "izz", 1, true),
+    ("box", "size", 3, true),
+    ("cylinder", "radius", 1, true),
+    ("cylinder", "length", 1, true),
+    ("capsule", "radius", 1, true),
+    ("capsule", "length", 1, true),
+    ("sphere", "radius", 1, true),
+    ("mesh", "filename", 0, true),
+    ("mesh", "scale", 3, false),
+    ("limit", "lower", 1, false),
+    ("limit", "upper", 1, false),
+    ("limit", "effort", 1, false),
+    ("limit", "velocity", 1, true),
+    ("dynamics", "damping", 1, false),
+    ("dynamics", "friction", 1, false),
+    ("mimic", "joint", 0, true),
+    ("mimic", "multiplier", 1, false),
+    ("mimic", "offset", 1, false),
+    ("color", "rgba", 4, true),
+];
+
+/// Missing or malformed attributes inside the links, joints and materials urdf-rs reads,
+/// named by their owner, element and line.
+fn check_attributes(doc: &roxmltree::Document, source_name: &str) -> Result<()> {
+    for owner in doc.root_element().children().filter(|n| n.is_element()) {
+        let kind = owner.tag_name().name();
+        if !matches!(kind, "link" | "joint" | "material") {
+            continue;
+        }
+        let owner_name = owner.attribute("name").unwrap_or("?");
+        // Of a link, urdf-rs reads only these parts; other children (e.g. extensions) are free.
+        let parts = owner.children().filter(|n| {
+            n.is_element()
+                && (kind != "link"
+                    || ["inertial", "visual", "collision"].contains(&n.tag_name().name()))
+        });
+        for element in parts
+            .flat_map(|p| p.descendants())
+            .filter(|n| n.is_element())
+        {
+            let tag = element.tag_name().name();
+            for &(_, attribute, count, required) in ATTRIBUTES.iter().filter(|a| a.0 == tag) {
+                let problem = match element.attribute(attribute) {
+                    None if required => format!("missing `{attribute}`"),
+                    Some(value) if count > 0 => {
+                        let numbers: Vec<&str> = value.split_whitespace().collect();
+                        if numbers.len() == count
+                            && numbers.iter().all(|v| v.parse::<f64>().is_ok())
+                        {
+                            continue;
+                        }
+                        let expected = if count == 1 {
+                            "a number".to_string()
+                        } else {
+                            format!("{count} numbers separated by spaces")
+                        };
+                        format!("`{attribute}` must be {expected}, got \"{value}\"")
+                    }
+                    _ => continue,
+                };
+                let pos = doc.text_pos_at(element.range().start);
+                return Err(SimError::urdf(
+                    source_name,
+                    format!("{kind} '{owner_name}' <{tag}> (line {})", pos.row),
+                    problem,
+                ));
+            }
         }
     }
     Ok(())
@@ -162,7 +273,11 @@ fn build_model(
         ];
         check_finite(&[i.mass.value], source_name, &location, "mass")?;
         check_finite(&inertia, source_name, &location, "inertia")?;
-        check_origin(&origin(&i.origin), source_name, &format!("{location} <inertial>"))?;
+        check_origin(
+            &origin(&i.origin),
+            source_name,
+            &format!("{location} <inertial>"),
+        )?;
         if i.mass.value < 0.0 {
             return Err(SimError::urdf(
                 source_name,
@@ -315,7 +430,11 @@ fn convert_joint(
     check_finite(&raw_axis, source_name, &location, "axis")?;
     let norm = raw_axis.iter().map(|v| v * v).sum::<f64>().sqrt();
     if kind.is_movable() && norm < 1e-9 {
-        return Err(SimError::urdf(source_name, location, "axis has zero length"));
+        return Err(SimError::urdf(
+            source_name,
+            location,
+            "axis has zero length",
+        ));
     }
     let axis = if norm < 1e-9 {
         [1.0, 0.0, 0.0]
@@ -454,7 +573,9 @@ fn check_tree(links: &[Link], joints: &[Joint], source_name: &str) -> Result<usi
             }
         }
     }
-    let roots: Vec<usize> = (0..links.len()).filter(|&l| parent_of[l].is_none()).collect();
+    let roots: Vec<usize> = (0..links.len())
+        .filter(|&l| parent_of[l].is_none())
+        .collect();
     match roots.as_slice() {
         [root] => Ok(*root),
         [] => Err(SimError::urdf(
