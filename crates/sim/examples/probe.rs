@@ -33,13 +33,7 @@ fn main() {
         scene.step_control().unwrap();
         if i % 150 == 0 {
             let d = relative(&scene) - start;
-            println!(
-                "t={t:.1} drift {:.4} {:.4} {:.4} open {:.4}",
-                d.x,
-                d.y,
-                d.z,
-                scene.gripper_opening()
-            );
+            let q = scene.robot().joint_positions(scene.world_multibody_joints()); let rel = scene.tcp_pose().rotation.inverse() * scene.object_state().pose.rotation; println!("t={t:.1} drift {:.4} {:.4} {:.4} fingers {:.4} {:.4} rel rot {:?}", d.x, d.y, d.z, q[6], q[7], rel.euler_angles());
         }
     }
 }

@@ -114,6 +114,33 @@ pub struct Robot {
     targets: Vec<f32>,
     gains: Vec<PdGains>,
     mode: DriveMode,
+    /// Body pairs whose contacts are ignored when self-collision is on (see
+    /// [`Self::exclude_touching_pairs`]).
+    self_collision_filter: SelfCollisionFilter,
+}
+
+/// Skips contacts between robot bodies that touch by design (overlapping housings of links two
+/// joints apart), like MoveIt's "always in collision" pairs. Only active with self-collision.
+#[derive(Clone, Debug, Default)]
+pub struct SelfCollisionFilter {
+    pairs: Vec<(RigidBodyHandle, RigidBodyHandle)>,
+}
+
+impl SelfCollisionFilter {
+    fn contains(&self, a: RigidBodyHandle, b: RigidBodyHandle) -> bool {
+        self.pairs
+            .iter()
+            .any(|&(x, y)| (x, y) == (a, b) || (x, y) == (b, a))
+    }
+}
+
+impl PhysicsHooks for SelfCollisionFilter {
+    fn filter_contact_pair(&self, context: &PairFilterContext) -> Option<SolverFlags> {
+        match (context.rigid_body1, context.rigid_body2) {
+            (Some(a), Some(b)) if self.contains(a, b) => None,
+            _ => Some(SolverFlags::default()),
+        }
+    }
 }
 
 fn shape_of(geometry: &Geometry, mode: MeshCollision) -> Option<(SharedShape, Pose)> {
@@ -237,6 +264,11 @@ impl Robot {
         };
         let collision_groups =
             InteractionGroups::new(groups::ROBOT, filter, InteractionTestMode::And);
+        let hooks = if options.self_collision {
+            ActiveHooks::FILTER_CONTACT_PAIRS
+        } else {
+            ActiveHooks::empty()
+        };
         for (l, (body, offset)) in link_frames.iter().enumerate() {
             let link = &model.links[l];
             let friction = options
@@ -266,6 +298,7 @@ impl Robot {
                     .density(0.0)
                     .friction(friction)
                     .collision_groups(collision_groups)
+                    .active_hooks(hooks)
                     .build();
                 colliders.insert_with_parent(collider, handles[*body], bodies);
             }
@@ -409,13 +442,50 @@ impl Robot {
             targets: vec![0.0; n],
             gains: vec![PdGains { kp: 0.0, kd: 0.0 }; n],
             mode: DriveMode::Position,
+            self_collision_filter: SelfCollisionFilter::default(),
         };
+        if options.self_collision {
+            robot.exclude_touching_pairs(bodies, colliders);
+        }
         robot.set_gains_all(PdGains {
             kp: 2_000.0,
             kd: 100.0,
         });
         robot.apply_motors(multibody_joints);
         Ok(robot)
+    }
+
+    /// Adds to the self-collision filter every pair of robot bodies whose shapes intersect in the
+    /// current configuration (bodies joined by a joint never collide anyway).
+    pub fn exclude_touching_pairs(&mut self, bodies: &RigidBodySet, colliders: &ColliderSet) {
+        for (i, &a) in self.bodies.iter().enumerate() {
+            for &b in &self.bodies[i + 1..] {
+                if self.self_collision_filter.contains(a, b) {
+                    continue;
+                }
+                let touching = bodies[a].colliders().iter().any(|&ca| {
+                    bodies[b].colliders().iter().any(|&cb| {
+                        let (ca, cb) = (&colliders[ca], &colliders[cb]);
+                        rapier3d::parry::query::intersection_test(
+                            ca.position(),
+                            ca.shape(),
+                            cb.position(),
+                            cb.shape(),
+                        )
+                        .map(|hit| hit.intersecting)
+                        .unwrap_or(false)
+                    })
+                });
+                if touching {
+                    self.self_collision_filter.pairs.push((a, b));
+                }
+            }
+        }
+    }
+
+    /// The contact filter to pass to the physics step.
+    pub fn self_collision_filter(&self) -> &SelfCollisionFilter {
+        &self.self_collision_filter
     }
 
     /// Index of the joint called `name` in [`Self::joints`].
