@@ -60,7 +60,7 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
     let mut n = 0u64;
     let idle_rate = rate(args.seconds, || {
         n += 1;
-        if n % 2400 == 0 {
+        if n.is_multiple_of(2400) {
             scene.restore(&idle);
         }
         scene.step_physics().map_err(Into::into)
@@ -75,7 +75,7 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
     let mut n = 0u64;
     let grasp_rate = rate(args.seconds, || {
         n += 1;
-        if n % 2400 == 0 {
+        if n.is_multiple_of(2400) {
             scene.restore(&held);
         }
         scene.step_physics().map_err(Into::into)

@@ -121,3 +121,25 @@ fn main() -> std::process::ExitCode {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_documented_scene_config_is_the_default() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/scene.toml");
+        let config = load_scene_config(&path).unwrap();
+        let default = SceneConfig::default();
+        // The file writes 1/240 and π/2 with fewer digits than f32 holds.
+        assert!((config.physics.dt - default.physics.dt).abs() < 1e-8);
+        let mut config = config;
+        config.physics.dt = default.physics.dt;
+        for (a, b) in config.arm.home.iter_mut().zip(&default.arm.home) {
+            assert!((*a - b).abs() < 1e-4);
+            *a = *b;
+        }
+        config.placement.yaw_range = default.placement.yaw_range;
+        assert_eq!(config, default);
+    }
+}

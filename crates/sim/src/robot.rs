@@ -195,6 +195,13 @@ impl Robot {
         colliders: &mut ColliderSet,
         multibody_joints: &mut MultibodyJointSet,
     ) -> Result<Self> {
+        if !model.joints.iter().any(|j| j.kind.is_movable()) {
+            return Err(SimError::urdf(
+                &model.source_name,
+                "robot",
+                "has no movable joint; nothing to simulate",
+            ));
+        }
         // 1. Group links into bodies: a link joined to its parent by a fixed joint rides on the
         //    parent's body. Joints are sorted root to leaves, so parents are placed first.
         let n_links = model.links.len();
@@ -306,7 +313,6 @@ impl Robot {
 
         // 4. Multibody joints for movable joints.
         let mut joints = Vec::new();
-        let mut joint_handles = Vec::new();
         for (model_index, joint) in model.joints.iter().enumerate() {
             if joint.kind == JointKind::Fixed {
                 continue;
@@ -347,7 +353,7 @@ impl Robot {
             if joint.kind != JointKind::Continuous {
                 builder = builder.limits(rj.axis(), [rj.limits.0, rj.limits.1]);
             }
-            let handle = multibody_joints
+            multibody_joints
                 .insert(
                     handles[parent_body],
                     handles[child_body],
@@ -361,38 +367,25 @@ impl Robot {
                         "rapier refused the joint (would close a loop)",
                     )
                 })?;
-            joint_handles.push(handle);
             joints.push(rj);
         }
-        let multibody = match joint_handles.first() {
-            Some(&h) => {
-                let link = multibody_joints
-                    .rigid_body_link(handles[0])
-                    .ok_or_else(|| SimError::Command("robot root is not in a multibody".into()))?;
-                let _ = h;
-                link.multibody
-            }
-            None => {
-                return Err(SimError::urdf(
-                    &model.source_name,
-                    "robot",
-                    "has no movable joint; nothing to simulate",
-                ));
-            }
-        };
-        for (j, joint) in joints.iter_mut().enumerate() {
-            let (_, body) = link_frames[model.joints[joint.model_index].child];
-            let _ = body;
+        let multibody = multibody_joints
+            .rigid_body_link(handles[0])
+            .ok_or_else(|| SimError::Command("robot root is not in a multibody".into()))?
+            .multibody;
+        for joint in joints.iter_mut() {
             let child_body = handles[link_frames[model.joints[joint.model_index].child].0];
             joint.link_id = multibody_joints
                 .rigid_body_link(child_body)
                 .map(|l| l.id)
-                .ok_or_else(|| SimError::Command(format!("joint {j} lost its multibody link")))?;
+                .ok_or_else(|| {
+                    SimError::Command(format!("joint '{}' lost its multibody link", joint.name))
+                })?;
         }
         // Mimic joints become DOF couplings.
         let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
-        for j in 0..joints.len() {
-            let model_joint = &model.joints[joints[j].model_index];
+        for joint in joints.iter_mut() {
+            let model_joint = &model.joints[joint.model_index];
             if let Some(m) = model_joint.mimic {
                 let leader_name = &model.joints[m.joint].name;
                 let leader = names.iter().position(|n| n == leader_name).ok_or_else(|| {
@@ -402,7 +395,7 @@ impl Robot {
                         format!("mimics '{leader_name}', which is not movable"),
                     )
                 })?;
-                joints[j].mimic = Some((leader, m.multiplier as f32, m.offset as f32));
+                joint.mimic = Some((leader, m.multiplier as f32, m.offset as f32));
             }
         }
         let mb = multibody_joints

@@ -179,7 +179,14 @@ impl Default for ArmConfig {
             base_xyz: [0.0, 0.0, 0.75],
             base_yaw: 0.0,
             // Flange pointing down, about 30 cm above the middle of the placement area.
-            home: vec![0.2056, -1.5709, -1.7669, -1.3746, 1.5708, -1.3651],
+            home: vec![
+                0.2056,
+                -1.5709,
+                -1.7669,
+                -1.3746,
+                std::f32::consts::FRAC_PI_2,
+                -1.3651,
+            ],
             kp: 8_000.0,
             kd: 400.0,
             armature: 0.1,

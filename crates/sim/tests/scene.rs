@@ -316,7 +316,8 @@ fn bad_commands_are_errors_not_panics() {
 
 #[test]
 fn invalid_settings_name_their_key() {
-    let cases: [(&str, fn(&mut SceneConfig)); 6] = [
+    type Mutation = fn(&mut SceneConfig);
+    let cases: [(&str, Mutation); 6] = [
         ("physics.dt", |c| c.physics.dt = 0.0),
         ("physics.substeps", |c| c.physics.substeps = 0),
         ("object.size", |c| c.object.size = 0.2),

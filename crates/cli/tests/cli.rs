@@ -1,0 +1,139 @@
+//! The `fairgrasp` binary as a user runs it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn fairgrasp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
+        .args(args)
+        .env_remove("ROS_PACKAGE_PATH")
+        .env_remove("FAIRGRASP_PACKAGE_PATH")
+        .output()
+        .expect("run fairgrasp")
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn text(output: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn inspect_prints_joint_table_chain_and_flange_pose_of_the_bundled_fr5() {
+    let urdf = repo().join("assets/robots/fr5/urdf/fr5.urdf");
+    let out = fairgrasp(&["inspect", urdf.to_str().unwrap()]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    for expected in [
+        "robot 'fr5'",
+        "j1",
+        "revolute",
+        "base_link",
+        "shoulder_link",
+        "-4.6251",
+        "150.0000",
+        "3.2000",
+        "chain: base_link -> shoulder_link -> upperarm_link -> forearm_link -> wrist1_link -> wrist2_link -> wrist3_link -> tool0",
+        "xyz = (-0.8200, -0.2021, 0.0500)",
+    ] {
+        assert!(
+            stdout.contains(expected),
+            "missing {expected:?} in:\n{stdout}"
+        );
+    }
+}
+
+#[test]
+fn inspect_resolves_package_meshes_from_a_flag() {
+    let data = repo().join("crates/sim/tests/data/mesh_robot");
+    let urdf = data.join("mesh_robot_description/urdf/arm.urdf");
+    let out = fairgrasp(&[
+        "inspect",
+        urdf.to_str().unwrap(),
+        "--package-path",
+        data.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("package://mesh_robot_description/meshes/base.stl"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("triangles"), "{stdout}");
+    assert!(stdout.contains("chain: "), "{stdout}");
+}
+
+#[test]
+fn inspect_reports_a_broken_urdf_without_panicking() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.urdf");
+    std::fs::write(
+        &bad,
+        r#"<robot name="r"><link name="a"/><link name="b"/>
+           <joint name="j" type="hinge"><parent link="a"/><child link="b"/></joint></robot>"#,
+    )
+    .unwrap();
+    let out = fairgrasp(&["inspect", bad.to_str().unwrap()]);
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("joint 'j'") && stderr.contains("hinge"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+
+    let xacro = dir.path().join("arm.urdf.xacro");
+    std::fs::write(
+        &xacro,
+        r#"<robot xmlns:xacro="http://www.ros.org/wiki/xacro"/>"#,
+    )
+    .unwrap();
+    let (_, stderr) = text(&fairgrasp(&["inspect", xacro.to_str().unwrap()]));
+    assert!(stderr.contains("expand it"), "{stderr}");
+
+    let (_, stderr) = text(&fairgrasp(&["inspect", "/no/such/robot.urdf"]));
+    assert!(stderr.contains("/no/such/robot.urdf"), "{stderr}");
+}
+
+#[test]
+fn scripted_pick_demo_reports_success_rate_and_drift() {
+    let out = fairgrasp(&["demo", "scripted-pick", "--episodes", "3", "--seed", "40"]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("success: 3/3"), "{stdout}");
+    assert!(stdout.contains("drift"), "{stdout}");
+}
+
+#[test]
+fn config_errors_name_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("[physics]\nsubsteps = 0\n", "physics.substeps"),
+        ("[object]\nmass = -0.1\n", "object.mass"),
+        ("[gripper]\nforce_limt = 10.0\n", "force_limt"),
+        ("[tabel]\nheight = 0.7\n", "tabel"),
+        ("[physics]\ndt = \"fast\"\n", "dt"),
+    ];
+    for (i, (toml, key)) in cases.iter().enumerate() {
+        let path = dir.path().join(format!("c{i}.toml"));
+        std::fs::write(&path, toml).unwrap();
+        let out = fairgrasp(&[
+            "demo",
+            "scripted-pick",
+            "--episodes",
+            "1",
+            "--config",
+            path.to_str().unwrap(),
+        ]);
+        let (_, stderr) = text(&out);
+        assert!(!out.status.success(), "{toml} accepted");
+        assert!(stderr.contains(key), "{toml}: {stderr}");
+    }
+    let (_, stderr) = text(&fairgrasp(&["demo", "scripted-pick", "--physics-hz=-5"]));
+    assert!(stderr.contains("--physics-hz"), "{stderr}");
+}
