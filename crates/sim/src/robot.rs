@@ -600,6 +600,34 @@ impl Robot {
         Ok(())
     }
 
+    /// Sets the viscous damping of a joint (N·m·s/rad or N·s/m).
+    pub fn set_joint_damping(
+        &mut self,
+        joint: usize,
+        damping: f32,
+        set: &mut MultibodyJointSet,
+    ) -> Result<()> {
+        if !(damping.is_finite() && damping >= 0.0) {
+            return Err(SimError::Command(format!(
+                "joint damping must be non-negative, got {damping}"
+            )));
+        }
+        let link_id = self
+            .joints
+            .get(joint)
+            .ok_or_else(|| SimError::Command(format!("no joint {joint}")))?
+            .link_id;
+        let mb = self.multibody_mut(set);
+        let dof = mb.link(link_id).expect("link").assembly_id();
+        mb.damping_mut()[dof] = damping;
+        Ok(())
+    }
+
+    /// Current PD gains of a joint.
+    pub fn gains(&self, joint: usize) -> Option<PdGains> {
+        self.gains.get(joint).copied()
+    }
+
     /// Current position targets.
     pub fn position_targets(&self) -> &[f32] {
         &self.targets

@@ -327,6 +327,19 @@ pub struct Snapshot {
     time: f64,
 }
 
+/// Physical parameters that domain randomisation varies per episode (see [`Scene::reset_with`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PhysicalParams {
+    /// Cube edge length (m).
+    pub object_size: f32,
+    pub object_mass: f32,
+    pub object_friction: f32,
+    /// Viscous damping of each arm joint (N·m·s/rad); `None` keeps the URDF values.
+    pub arm_damping: Option<Vec<f32>>,
+    /// Factor on the arm's PD gains (actuator strength).
+    pub gain_scale: f32,
+}
+
 /// The pose and velocity of a rigid object.
 #[derive(Clone, Copy, Debug)]
 pub struct ObjectState {
@@ -354,6 +367,8 @@ pub struct Scene {
     object: RigidBodyHandle,
     object_collider: ColliderHandle,
     table_top: f32,
+    /// Edge length of the cube in this episode.
+    object_size: f32,
     home: Snapshot,
     /// TCP pose at the home joint vector.
     home_tcp: Isometry3<f64>,
@@ -546,6 +561,7 @@ impl Scene {
             object,
             object_collider,
             table_top,
+            object_size: config.object.size,
             home_tcp: Isometry3::identity(),
             time: 0.0,
             config,
@@ -889,7 +905,80 @@ impl Scene {
 
     /// Height of the object's centre when resting on the table (m).
     pub fn object_rest_height(&self) -> f64 {
-        (self.table_top + self.config.object.size / 2.0) as f64
+        (self.table_top + self.object_size / 2.0) as f64
+    }
+
+    /// Edge length of the cube in this episode (m).
+    pub fn object_size(&self) -> f32 {
+        self.object_size
+    }
+
+    /// Whether the object has left the table: dropped below its top or beyond its edges.
+    pub fn object_off_table(&self) -> bool {
+        let p = self.object_state().pose.translation.vector;
+        let t = &self.config.table;
+        p.z < (self.table_top - self.object_size) as f64
+            || (p.x - t.center[0] as f64).abs() > t.size[0] as f64 / 2.0
+            || (p.y - t.center[1] as f64).abs() > t.size[1] as f64 / 2.0
+    }
+
+    /// The physical parameters of the configuration, unrandomised.
+    pub fn nominal_params(&self) -> PhysicalParams {
+        PhysicalParams {
+            object_size: self.config.object.size,
+            object_mass: self.config.object.mass,
+            object_friction: self.config.object.friction,
+            arm_damping: None,
+            gain_scale: 1.0,
+        }
+    }
+
+    fn apply_params(&mut self, params: &PhysicalParams) -> Result<()> {
+        let size = params.object_size;
+        if !(size.is_finite() && size > 0.0 && size <= 0.085) {
+            return Err(SimError::Command(format!(
+                "object size {size} m must be in (0, 0.085]"
+            )));
+        }
+        if !(params.gain_scale.is_finite() && params.gain_scale > 0.0) {
+            return Err(SimError::Command(format!(
+                "gain scale {} must be positive",
+                params.gain_scale
+            )));
+        }
+        self.set_object_properties(params.object_mass, params.object_friction)?;
+        if size != self.object_size {
+            let half = size / 2.0;
+            let mass = params.object_mass;
+            let collider = &mut self.world.colliders[self.object_collider];
+            collider.set_shape(SharedShape::cuboid(half, half, half));
+            collider.set_mass(mass);
+            self.object_size = size;
+        }
+        for (i, &j) in self.arm.iter().enumerate() {
+            if let Some(damping) = &params.arm_damping {
+                let d = *damping.get(i).ok_or_else(|| {
+                    SimError::Command(format!(
+                        "arm damping has {} values, the arm has {} joints",
+                        damping.len(),
+                        self.arm.len()
+                    ))
+                })?;
+                self.robot
+                    .set_joint_damping(j, d, &mut self.world.multibody_joints)?;
+            }
+            self.robot.set_gains(
+                j,
+                PdGains {
+                    kp: self.config.arm.kp * params.gain_scale,
+                    kd: self.config.arm.kd * params.gain_scale,
+                },
+            )?;
+        }
+        // Gains take effect through the motors at the next target update.
+        let targets = self.robot.position_targets().to_vec();
+        self.robot
+            .set_position_targets(&targets, &mut self.world.multibody_joints)
     }
 
     /// Places the object at `pose` (world) with zero velocity.
@@ -968,8 +1057,33 @@ impl Scene {
 
     /// [`Self::reset`] drawing from a caller's random stream.
     pub fn reset_with_rng(&mut self, rng: &mut impl Rng) -> Result<Isometry3<f64>> {
+        let nominal = self.nominal_params();
+        self.reset_with(rng, &nominal, &[])
+    }
+
+    /// Resets with given physical parameters and an offset added to the home joint vector
+    /// (initial joint jitter), then places the object as [`Self::reset`] does.
+    pub fn reset_with(
+        &mut self,
+        rng: &mut impl Rng,
+        params: &PhysicalParams,
+        home_offset: &[f32],
+    ) -> Result<Isometry3<f64>> {
         let home = self.home.clone();
         self.restore(&home);
+        self.object_size = self.config.object.size;
+        self.apply_params(params)?;
+        if !home_offset.is_empty() {
+            let q: Vec<f32> = self
+                .config
+                .arm
+                .home
+                .iter()
+                .zip(home_offset.iter().chain(std::iter::repeat(&0.0)))
+                .map(|(h, o)| h + o)
+                .collect();
+            self.set_arm_positions(&q)?;
+        }
         let p = &self.config.placement;
         let home_q = self.arm_positions();
         for _ in 0..100 {

@@ -1,0 +1,97 @@
+//! Gymnasium's `Box` space: a product of intervals, float32.
+
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// A box `[low, high]` of f32 values with a shape (flattened row-major).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BoxSpace {
+    pub low: Vec<f32>,
+    pub high: Vec<f32>,
+    pub shape: Vec<usize>,
+}
+
+impl BoxSpace {
+    /// A one-dimensional box; `low` and `high` must have the same length.
+    pub fn new(low: Vec<f32>, high: Vec<f32>) -> Self {
+        assert_eq!(low.len(), high.len(), "box bounds of different lengths");
+        let shape = vec![low.len()];
+        Self { low, high, shape }
+    }
+
+    /// An unbounded box of `n` values.
+    pub fn unbounded(n: usize) -> Self {
+        Self::new(vec![f32::NEG_INFINITY; n], vec![f32::INFINITY; n])
+    }
+
+    /// Number of values.
+    pub fn dim(&self) -> usize {
+        self.low.len()
+    }
+
+    /// The element type, as Gymnasium names it.
+    pub fn dtype(&self) -> &'static str {
+        "float32"
+    }
+
+    /// Whether every bound is finite.
+    pub fn is_bounded(&self) -> bool {
+        self.low.iter().chain(&self.high).all(|v| v.is_finite())
+    }
+
+    /// Whether `x` has the right length, is finite and lies in the box.
+    pub fn contains(&self, x: &[f32]) -> bool {
+        x.len() == self.dim()
+            && x.iter()
+                .zip(self.low.iter().zip(&self.high))
+                .all(|(v, (lo, hi))| v.is_finite() && *v >= *lo && *v <= *hi)
+    }
+
+    /// Clips `x` into the box in place.
+    pub fn clip(&self, x: &mut [f32]) {
+        for (v, (lo, hi)) in x.iter_mut().zip(self.low.iter().zip(&self.high)) {
+            *v = v.clamp(*lo, *hi);
+        }
+    }
+
+    /// A uniform sample (bounded boxes) or a standard normal one (unbounded dimensions).
+    pub fn sample(&self, rng: &mut impl Rng) -> Vec<f32> {
+        self.low
+            .iter()
+            .zip(&self.high)
+            .map(|(&lo, &hi)| {
+                if lo.is_finite() && hi.is_finite() {
+                    lo + (hi - lo) * rng.random::<f32>()
+                } else {
+                    // Box-Muller; clamp into whichever side is bounded.
+                    let u1: f32 = rng.random::<f32>().max(1e-12);
+                    let u2: f32 = rng.random();
+                    let n = (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos();
+                    n.clamp(lo, hi)
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn samples_lie_in_the_box_and_clip_projects_onto_it() {
+        let space = BoxSpace::new(vec![-1.0, 0.0, -0.05], vec![1.0, 2.0, 0.05]);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..1000 {
+            assert!(space.contains(&space.sample(&mut rng)));
+        }
+        let mut x = vec![5.0, -3.0, 0.01];
+        space.clip(&mut x);
+        assert_eq!(x, vec![1.0, 0.0, 0.01]);
+        assert!(!space.contains(&[0.0, 0.0]));
+        assert!(!space.contains(&[f32::NAN, 0.0, 0.0]));
+        assert!(BoxSpace::unbounded(3).contains(&[1e30, -1e30, 0.0]));
+        assert!(!BoxSpace::unbounded(3).is_bounded());
+    }
+}
