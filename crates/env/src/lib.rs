@@ -13,6 +13,7 @@ pub mod core;
 pub mod error;
 pub mod grasp;
 pub mod observation;
+pub mod scripted;
 pub mod spaces;
 
 pub use crate::core::{Env, EpisodeEvent, Info, Step};

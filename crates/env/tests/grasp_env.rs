@@ -1,0 +1,320 @@
+//! The grasp environment's contract: spaces, seeding, clipping, errors, rewards, termination.
+
+use fairgrasp_env::config::{ActionMode, EnvConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::core::EpisodeEvent;
+use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::{Env, EnvError, GraspEnv};
+use rand::SeedableRng;
+
+fn env_with(mutate: impl FnOnce(&mut EnvConfig)) -> GraspEnv {
+    let mut config = EnvConfig::default();
+    mutate(&mut config);
+    GraspEnv::new(config).expect("env builds")
+}
+
+/// Runs the scripted policy for one episode; returns (success, steps, return).
+fn scripted_episode(env: &mut GraspEnv, seed: u64) -> (bool, u32, f32) {
+    env.reset(Some(seed)).unwrap();
+    let mut policy = ScriptedGraspPolicy::new(env);
+    let mut total = 0.0;
+    loop {
+        let action = policy.act(env);
+        assert!(
+            env.action_space().contains(&action),
+            "scripted action outside the space"
+        );
+        let step = env.step(&action).unwrap();
+        total += step.reward;
+        if step.terminated || step.truncated {
+            return (step.info.success, step.info.elapsed_steps, total);
+        }
+    }
+}
+
+#[test]
+fn scripted_policy_through_step_grasps_in_joint_and_cartesian_mode() {
+    for mode in [ActionMode::Joint, ActionMode::Cartesian] {
+        let mut env = env_with(|c| c.task.action_mode = mode);
+        let mut successes = 0;
+        for seed in 0..20 {
+            let (success, steps, total) = scripted_episode(&mut env, 1000 + seed);
+            if success {
+                successes += 1;
+                assert!(steps < 100, "{mode:?}: success took {steps} steps");
+                assert!(total > 10.0, "{mode:?}: success return {total}");
+            }
+        }
+        assert!(
+            successes >= 19,
+            "{mode:?}: {successes}/20 scripted successes"
+        );
+    }
+}
+
+#[test]
+fn spaces_match_the_configured_preset_and_mode() {
+    for (obs, mode, dim_obs, dim_act) in [
+        (ObservationPreset::Seed23, ActionMode::Joint, 23, 7),
+        (ObservationPreset::Seed23, ActionMode::Cartesian, 23, 5),
+        (ObservationPreset::Rich, ActionMode::Joint, 40, 7),
+        (ObservationPreset::Rich, ActionMode::Cartesian, 38, 5),
+    ] {
+        let mut env = env_with(|c| {
+            c.task.observation = obs;
+            c.task.action_mode = mode;
+        });
+        assert_eq!(env.observation_space().dim(), dim_obs);
+        assert_eq!(env.action_space().dim(), dim_act);
+        assert_eq!(env.observation_space().dtype(), "float32");
+        let (o, info) = env.reset(Some(1)).unwrap();
+        assert_eq!(o.len(), dim_obs);
+        assert!(env.observation_space().contains(&o));
+        assert!(info.episode_params.is_some());
+    }
+    let env = env_with(|c| c.task.max_joint_delta = 0.1);
+    assert_eq!(env.action_space().high[0], 0.1);
+    assert_eq!(env.action_space().low[6], -1.0);
+}
+
+#[test]
+fn seed23_layout_reads_the_scene() {
+    let mut env = env_with(|c| c.task.observation = ObservationPreset::Seed23);
+    let (o, _) = env.reset(Some(4)).unwrap();
+    let scene = env.scene();
+    let q = scene.arm_positions();
+    assert_eq!(&o[0..6], q.as_slice());
+    let base = scene.base_pose();
+    let object = base.inverse() * scene.object_state().pose;
+    assert!((o[12] - object.translation.x as f32).abs() < 1e-6);
+    assert!((o[14] - object.translation.z as f32).abs() < 1e-6);
+    let quat_norm: f32 = o[15..19].iter().map(|v| v * v).sum::<f32>().sqrt();
+    assert!((quat_norm - 1.0).abs() < 1e-4);
+    assert!((o[22] - scene.gripper_opening()).abs() < 1e-6);
+}
+
+fn random_trajectory(seed: u64, randomize: bool, steps: usize) -> Vec<(Vec<f32>, f32, bool, bool)> {
+    let mut env = env_with(|c| c.randomization.enabled = randomize);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
+    let mut out = Vec::new();
+    let (obs, _) = env.reset(Some(seed)).unwrap();
+    out.push((obs, 0.0, false, false));
+    for _ in 0..steps {
+        let action = env.action_space().sample(&mut rng);
+        let step = env.step(&action).unwrap();
+        let done = step.terminated || step.truncated;
+        out.push((step.obs, step.reward, step.terminated, step.truncated));
+        if done {
+            let (obs, _) = env.reset(None).unwrap();
+            out.push((obs, 0.0, false, false));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_same_seed_gives_a_bit_identical_trajectory() {
+    for randomize in [false, true] {
+        let a = random_trajectory(21, randomize, 150);
+        let b = random_trajectory(21, randomize, 150);
+        let c = random_trajectory(22, randomize, 150);
+        assert_eq!(a, b, "randomize = {randomize}");
+        assert_ne!(a, c, "randomize = {randomize}");
+    }
+}
+
+#[test]
+fn randomization_varies_the_episode_parameters_within_their_ranges() {
+    let mut env = env_with(|c| c.randomization.enabled = true);
+    let ranges = env.config().randomization.clone();
+    let mut masses = Vec::new();
+    for _ in 0..20 {
+        let (_, info) = env.reset(None).unwrap();
+        let p = info.episode_params.unwrap();
+        assert!(p.object_mass >= ranges.object_mass[0] && p.object_mass <= ranges.object_mass[1]);
+        assert!(p.object_size >= ranges.object_size[0] && p.object_size <= ranges.object_size[1]);
+        assert!(p.latency_steps <= ranges.max_latency_steps);
+        assert_eq!(p.arm_damping.len(), 6);
+        assert!(
+            p.arm_damping
+                .iter()
+                .all(|d| *d >= ranges.joint_damping[0] && *d <= ranges.joint_damping[1])
+        );
+        // The cube really has the drawn size: it rests at half its edge above the table.
+        let rest = env.scene().object_state().pose.translation.z - env.scene().table_top() as f64;
+        assert!(
+            (rest - p.object_size as f64 / 2.0).abs() < 2e-3,
+            "rest {rest} size {}",
+            p.object_size
+        );
+        masses.push(p.object_mass);
+    }
+    assert!(masses.windows(2).any(|w| w[0] != w[1]));
+    let mut plain = env_with(|_| {});
+    let (_, info) = plain.reset(Some(1)).unwrap();
+    let p = info.episode_params.unwrap();
+    assert_eq!((p.object_mass, p.latency_steps), (0.1, 0));
+}
+
+#[test]
+fn actions_outside_the_box_are_clipped() {
+    let mut a = env_with(|_| {});
+    let mut b = env_with(|_| {});
+    a.reset(Some(3)).unwrap();
+    b.reset(Some(3)).unwrap();
+    let wild = [5.0, -5.0, 0.3, -0.3, 1.0, 0.0, 7.0];
+    let clipped = [0.05, -0.05, 0.05, -0.05, 0.05, 0.0, 1.0];
+    for _ in 0..5 {
+        assert_eq!(a.step(&wild).unwrap(), b.step(&clipped).unwrap());
+    }
+}
+
+#[test]
+fn bad_actions_are_errors_that_change_nothing() {
+    let mut a = env_with(|_| {});
+    let mut b = env_with(|_| {});
+    assert!(
+        matches!(a.step(&[0.0; 7]), Err(EnvError::Usage(_))),
+        "step before reset"
+    );
+    a.reset(Some(8)).unwrap();
+    b.reset(Some(8)).unwrap();
+    let err = a.step(&[0.0; 6]).unwrap_err().to_string();
+    assert!(err.contains("expected 7") && err.contains("got 6"), "{err}");
+    let err = a
+        .step(&[0.0, f32::NAN, 0.0, 0.0, 0.0, 0.0, 1.0])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("NaN"), "{err}");
+    assert!(a.step(&[f32::INFINITY; 7]).is_err());
+    // The rejected actions left no trace.
+    let ok = [0.01, 0.0, -0.01, 0.0, 0.0, 0.0, 1.0];
+    assert_eq!(a.step(&ok).unwrap(), b.step(&ok).unwrap());
+}
+
+#[test]
+fn episodes_end_at_the_time_limit_and_refuse_further_steps() {
+    let mut env = env_with(|c| c.task.max_episode_steps = 5);
+    env.reset(Some(0)).unwrap();
+    let hold = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    for i in 1..=5 {
+        let step = env.step(&hold).unwrap();
+        assert!(!step.terminated);
+        assert_eq!(step.truncated, i == 5, "step {i}");
+        assert_eq!(step.info.elapsed_steps, i);
+    }
+    assert!(matches!(env.step(&hold), Err(EnvError::Usage(_))));
+    env.reset(None).unwrap();
+    assert!(env.step(&hold).is_ok());
+}
+
+#[test]
+fn hybrid_reward_terms_sum_up_and_one_time_bonuses_are_paid_once() {
+    let mut env = env_with(|c| c.task.max_episode_steps = 200);
+    env.reset(Some(5)).unwrap();
+    let mut policy = ScriptedGraspPolicy::new(&env);
+    let mut grasp_bonuses = 0;
+    let mut lift_bonuses = 0;
+    loop {
+        let action = policy.act(&env);
+        let step = env.step(&action).unwrap();
+        let t = step.info.reward_terms;
+        assert!((t.total() - step.reward).abs() < 1e-6);
+        assert!((t.time + 0.01).abs() < 1e-6);
+        if t.grasp > 0.0 {
+            grasp_bonuses += 1;
+            assert!(step.info.grasped);
+        }
+        if t.lift_hold > 0.0 {
+            lift_bonuses += 1;
+            assert!(step.info.success);
+        }
+        if step.info.ee_object_distance < 0.1 {
+            assert_eq!(t.near, 0.5);
+        }
+        if step.terminated || step.truncated {
+            assert!(step.info.success && step.terminated);
+            break;
+        }
+    }
+    assert_eq!((grasp_bonuses, lift_bonuses), (1, 1));
+}
+
+#[test]
+fn sparse_reward_pays_only_on_success() {
+    let mut env = env_with(|c| c.reward.kind = RewardKind::Sparse);
+    env.reset(Some(6)).unwrap();
+    let mut policy = ScriptedGraspPolicy::new(&env);
+    loop {
+        let step = env.step(&policy.act(&env)).unwrap();
+        if step.terminated || step.truncated {
+            assert!(step.info.success);
+            assert_eq!(step.reward, 10.0);
+            break;
+        }
+        assert_eq!(step.reward, 0.0);
+    }
+}
+
+#[test]
+fn an_object_that_leaves_the_table_terminates_with_a_penalty() {
+    // A table too small for the placement area: the cube falls off the edge at reset.
+    let mut env = env_with(|c| {
+        c.scene.table.size = [0.3, 0.3];
+        c.scene.table.center = [0.0, 0.0];
+    });
+    env.reset(Some(2)).unwrap();
+    let step = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
+    assert!(step.terminated);
+    assert!(step.info.events.contains(&EpisodeEvent::ObjectOffTable));
+    assert_eq!(step.info.reward_terms.off_table, -10.0);
+}
+
+#[test]
+fn config_errors_name_the_key() {
+    for (text, key) in [
+        ("[task]\nmax_joint_delta = 2.0\n", "task.max_joint_delta"),
+        ("[task]\naction_mode = \"teleport\"\n", "teleport"),
+        ("[reward]\ngrasp_bonus = 1.0\n", "grasp_bonus"),
+        (
+            "[randomization]\nobject_mass = [0.3, 0.1]\n",
+            "randomization.object_mass",
+        ),
+        (
+            "[scene.gripper]\nforce_limit = -1.0\n",
+            "scene.gripper.force_limit",
+        ),
+        ("[task]\nmax_episode_steps = 0\n", "task.max_episode_steps"),
+    ] {
+        let err = EnvConfig::from_toml_str(text, &[]).unwrap_err().to_string();
+        assert!(err.contains(key), "{text}: {err}");
+    }
+    let err = EnvConfig::with_overrides(&["task.max_episode_stepz=3".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("max_episode_stepz"), "{err}");
+    let c = EnvConfig::with_overrides(&[
+        "task.action_mode=cartesian".into(),
+        "randomization.enabled=true".into(),
+        "scene.physics.substeps=4".into(),
+    ])
+    .unwrap();
+    assert_eq!(c.task.action_mode, ActionMode::Cartesian);
+    assert!(c.randomization.enabled);
+    assert_eq!(c.scene.physics.substeps, 4);
+    // A saved configuration loads back unchanged.
+    let back = EnvConfig::from_toml_str(&c.to_toml_string(), &[]).unwrap();
+    assert_eq!(back, c);
+}
+
+#[test]
+fn ansi_rendering_describes_the_state() {
+    let mut env = env_with(|c| c.task.render_mode = Some(fairgrasp_env::core::RenderMode::Ansi));
+    env.reset(Some(0)).unwrap();
+    match env.render().unwrap() {
+        Some(fairgrasp_env::core::Frame::Text(t)) => {
+            assert!(t.contains("FaArmGrasp-v0") && t.contains("opening"))
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(env_with(|_| {}).render().unwrap().is_none());
+}
