@@ -3,6 +3,7 @@
 
 mod bench;
 mod demo;
+mod env_cmd;
 mod inspect;
 
 use anyhow::{Context, Result};
@@ -28,6 +29,9 @@ enum Command {
     /// Run a demonstration in simulation.
     #[command(subcommand)]
     Demo(demo::DemoCommand),
+    /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
+    #[command(subcommand)]
+    Env(env_cmd::EnvCommand),
     /// Measure simulator throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -111,6 +115,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Inspect(args) => inspect::run(&args),
         Command::Demo(command) => demo::run(command),
+        Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
     };
     match result {

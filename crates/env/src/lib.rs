@@ -8,6 +8,7 @@
 //! - [`config`]: every knob, from TOML, overridable by dotted keys;
 //! - [`observation`]: the `seed23` and `rich` observation layouts.
 
+pub mod check;
 pub mod config;
 pub mod core;
 pub mod error;

@@ -119,10 +119,18 @@ impl ScriptedGraspPolicy {
                 let desired = scene
                     .solve_ik(&self.commanded, &current)
                     .unwrap_or_else(|_| current.clone());
+                // Scale the joint step as a whole (not joint by joint) so the TCP keeps to the
+                // planned line when one joint saturates.
+                let largest = desired
+                    .iter()
+                    .zip(&current)
+                    .map(|(d, c)| (d - c).abs())
+                    .fold(0.0f32, f32::max);
+                let scale = if largest > max { max / largest } else { 1.0 };
                 let mut action: Vec<f32> = desired
                     .iter()
                     .zip(&current)
-                    .map(|(d, c)| (d - c).clamp(-max, max))
+                    .map(|(d, c)| ((d - c) * scale).clamp(-max, max))
                     .collect();
                 action.push(gripper);
                 action

@@ -1,0 +1,290 @@
+//! `fairgrasp env …`: check, exercise and measure the grasp environment.
+
+use anyhow::{Context, Result};
+use fairgrasp_env::check::{CheckReport, check_env};
+use fairgrasp_env::config::{ActionMode, EnvConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::{Env, EpisodeEvent, GraspEnv};
+use rand::SeedableRng;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Environment settings shared by the `env` commands.
+#[derive(clap::Args, Clone, Debug)]
+pub struct EnvArgs {
+    /// TOML file with environment settings (sections: scene.*, task, reward, randomization).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override a setting: `--set task.action_mode=cartesian --set randomization.enabled=true`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+impl EnvArgs {
+    pub fn env_config(&self) -> Result<EnvConfig> {
+        Ok(match &self.config {
+            Some(path) => EnvConfig::load(path, &self.overrides)?,
+            None => EnvConfig::with_overrides(&self.overrides)?,
+        })
+    }
+}
+
+#[derive(clap::Subcommand)]
+pub enum EnvCommand {
+    /// Verify the Gymnasium contract, determinism and a NaN-free random rollout, for every
+    /// observation preset, action mode and reward type, with and without randomisation.
+    Check(CheckArgs),
+    /// Random actions: throughput and episode statistics.
+    Random(RandomArgs),
+    /// The scripted grasp policy driven through step(): success rate.
+    Scripted(ScriptedArgs),
+}
+
+#[derive(clap::Args)]
+pub struct CheckArgs {
+    /// Random-action steps per variant.
+    #[arg(long, default_value_t = 10_000)]
+    pub steps: u64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Check only the configuration as given, not every variant.
+    #[arg(long)]
+    pub only: bool,
+    #[command(flatten)]
+    pub env: EnvArgs,
+}
+
+#[derive(clap::Args)]
+pub struct RandomArgs {
+    #[arg(long, default_value_t = 10_000)]
+    pub steps: u64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub env: EnvArgs,
+}
+
+#[derive(clap::Args)]
+pub struct ScriptedArgs {
+    #[arg(long, default_value_t = 100)]
+    pub episodes: u32,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub env: EnvArgs,
+}
+
+pub fn run(command: EnvCommand) -> Result<()> {
+    match command {
+        EnvCommand::Check(args) => check(&args),
+        EnvCommand::Random(args) => random(&args),
+        EnvCommand::Scripted(args) => scripted(&args),
+    }
+}
+
+fn print_report(label: &str, report: &CheckReport) {
+    let verdict = if report.passed() { "PASS" } else { "FAIL" };
+    let e = &report.episodes;
+    println!(
+        "{verdict}  {label}: {} steps, episodes: {} success, {} time limit, {} off table, {} other; {} NaN observations",
+        report.rollout_steps,
+        e.success,
+        e.time_limit,
+        e.object_off_table,
+        e.other,
+        report.nan_observations
+    );
+    for (name, result) in &report.checks {
+        if let Err(problem) = result {
+            println!("      {name}: {problem}");
+        }
+    }
+}
+
+fn check(args: &CheckArgs) -> Result<()> {
+    let base = args.env.env_config()?;
+    let mut variants = Vec::new();
+    if args.only {
+        variants.push(base.clone());
+    } else {
+        for randomize in [false, true] {
+            for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
+                for mode in [ActionMode::Joint, ActionMode::Cartesian] {
+                    for reward in [RewardKind::Sparse, RewardKind::Hybrid] {
+                        let mut c = base.clone();
+                        c.task.observation = obs;
+                        c.task.action_mode = mode;
+                        c.reward.kind = reward;
+                        c.randomization.enabled = randomize;
+                        variants.push(c);
+                    }
+                }
+            }
+        }
+    }
+    let started = Instant::now();
+    let mut failures = 0;
+    for config in &variants {
+        let label = format!(
+            "obs={:?} action={:?} reward={:?} randomization={}",
+            config.task.observation,
+            config.task.action_mode,
+            config.reward.kind,
+            if config.randomization.enabled {
+                "on"
+            } else {
+                "off"
+            }
+        );
+        let mut env = GraspEnv::new(config.clone())?;
+        let mut twin = GraspEnv::new(config.clone())?;
+        let report = check_env(&mut env, &mut twin, args.steps, args.seed);
+        print_report(&label, &report);
+        if !report.passed() {
+            failures += 1;
+        }
+    }
+    println!(
+        "{} of {} variants passed in {:.1} s",
+        variants.len() - failures,
+        variants.len(),
+        started.elapsed().as_secs_f64()
+    );
+    anyhow::ensure!(failures == 0, "{failures} variant(s) failed the check");
+    Ok(())
+}
+
+fn random(args: &RandomArgs) -> Result<()> {
+    let config = args.env.env_config()?;
+    let mut env = GraspEnv::new(config)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
+    env.reset(Some(args.seed))?;
+    let mut stats = RolloutStats::default();
+    let mut episode_return = 0.0f64;
+    let started = Instant::now();
+    for _ in 0..args.steps {
+        let action = env.action_space().sample(&mut rng);
+        let step =
+            match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| env.step(&action))) {
+                Ok(step) => step.context("step failed")?,
+                Err(_) => {
+                    stats.panics += 1;
+                    env.reset(None)?;
+                    continue;
+                }
+            };
+        stats.steps += 1;
+        if step.obs.iter().any(|v| !v.is_finite()) {
+            stats.nan_observations += 1;
+        }
+        episode_return += step.reward as f64;
+        if step.terminated || step.truncated {
+            stats.end_episode(&step, episode_return);
+            episode_return = 0.0;
+            env.reset(None)?;
+        }
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    println!(
+        "{} random steps in {elapsed:.1} s: {:.0} env steps/s ({:.0} physics steps/s), one env, one thread",
+        stats.steps,
+        stats.steps as f64 / elapsed,
+        stats.steps as f64 * env.config().scene.physics.substeps as f64 / elapsed
+    );
+    stats.print();
+    anyhow::ensure!(
+        stats.nan_observations == 0 && stats.panics == 0 && stats.other == 0,
+        "the rollout had NaN observations, panics or unexplained episode ends"
+    );
+    Ok(())
+}
+
+/// Episode statistics of a rollout.
+#[derive(Default)]
+struct RolloutStats {
+    steps: u64,
+    episodes: u64,
+    returns: f64,
+    lengths: u64,
+    success: u64,
+    time_limit: u64,
+    off_table: u64,
+    other: u64,
+    nan_observations: u64,
+    panics: u64,
+}
+
+impl RolloutStats {
+    fn end_episode(&mut self, step: &fairgrasp_env::Step, episode_return: f64) {
+        self.episodes += 1;
+        self.returns += episode_return;
+        self.lengths += step.info.elapsed_steps as u64;
+        if step.info.success {
+            self.success += 1;
+        } else if step.info.events.contains(&EpisodeEvent::ObjectOffTable) {
+            self.off_table += 1;
+        } else if step.truncated && !step.info.events.contains(&EpisodeEvent::NonFiniteState) {
+            self.time_limit += 1;
+        } else {
+            self.other += 1;
+        }
+    }
+
+    fn print(&self) {
+        let n = self.episodes.max(1) as f64;
+        println!(
+            "episodes: {} (success {}, time limit {}, object off table {}, other {}); mean return {:.3}, mean length {:.1}",
+            self.episodes,
+            self.success,
+            self.time_limit,
+            self.off_table,
+            self.other,
+            self.returns / n,
+            self.lengths as f64 / n
+        );
+        println!(
+            "NaN observations: {}, panics: {}",
+            self.nan_observations, self.panics
+        );
+    }
+}
+
+fn scripted(args: &ScriptedArgs) -> Result<()> {
+    anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
+    let config = args.env.env_config()?;
+    let mode = config.task.action_mode;
+    let mut env = GraspEnv::new(config)?;
+    let started = Instant::now();
+    let mut successes = 0;
+    let mut lengths = 0u64;
+    let mut failed = Vec::new();
+    for i in 0..args.episodes as u64 {
+        let seed = args.seed + i;
+        env.reset(Some(seed))?;
+        let mut policy = ScriptedGraspPolicy::new(&env);
+        loop {
+            let action = policy.act(&env);
+            let step = env.step(&action)?;
+            if step.terminated || step.truncated {
+                if step.info.success {
+                    successes += 1;
+                    lengths += step.info.elapsed_steps as u64;
+                } else {
+                    failed.push(seed);
+                }
+                break;
+            }
+        }
+    }
+    println!(
+        "scripted policy through step(), {mode:?} mode: {successes}/{} successes ({:.1}%), mean length of successful episodes {:.1} steps, {:.1} s",
+        args.episodes,
+        100.0 * successes as f64 / args.episodes as f64,
+        lengths as f64 / successes.max(1) as f64,
+        started.elapsed().as_secs_f64()
+    );
+    if !failed.is_empty() {
+        println!("failed seeds: {failed:?}");
+    }
+    Ok(())
+}

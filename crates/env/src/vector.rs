@@ -1,0 +1,603 @@
+//! Vectorised environments: N copies of an [`Env`] stepped together, with automatic resets.
+//!
+//! [`VecEnv`] mirrors Stable-Baselines3's `VecEnv` (`DummyVecEnv` with one thread,
+//! `SubprocVecEnv`-like parallelism on a rayon thread pool otherwise) and Gymnasium's vector
+//! environments in their `SAME_STEP` autoreset mode:
+//!
+//! - observations, rewards and flags come back as contiguous row-major batches
+//!   (`num_envs × obs_dim` f32 observations, `num_envs` rewards, …) owned by the vector env;
+//! - an environment whose episode ends is reset at once: its row of the returned observations is
+//!   the new episode's first observation, and the finished episode's last observation, its
+//!   statistics and the reset info are kept in [`VecStep::episode_ends`] (SB3's
+//!   `info["terminal_observation"]`, `info["episode"]` and `reset_infos`);
+//! - `reset(Some(seed))` resets environment `i` with `seed + i`, like SB3's `VecEnv.seed(seed)`
+//!   and Gymnasium's `reset(seed=seed)` on a vector env;
+//! - results do not depend on the number of threads: each environment owns its random stream
+//!   and is stepped by exactly one thread per call.
+//!
+//! [`VectorEnv`] is the interface shared with vector wrappers such as
+//! [`crate::wrappers::VecNormalize`] (SB3's `VecEnvWrapper`).
+
+use crate::core::{Env, Info};
+use crate::error::{EnvError, Result};
+use crate::spaces::BoxSpace;
+use crate::wrappers::{EpisodeAccumulator, EpisodeStats};
+use rayon::prelude::*;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+
+/// What is kept when an environment's episode ends inside [`VectorEnv::step`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct EpisodeEnd {
+    /// The last observation of the finished episode (SB3's `info["terminal_observation"]`,
+    /// Gymnasium's `final_obs`): bootstrap truncated episodes from it, not from the returned
+    /// observation row, which already belongs to the next episode. Vector wrappers that
+    /// transform observations transform this one too.
+    pub terminal_observation: Vec<f32>,
+    /// Return, length and success of the finished episode (SB3 `Monitor`'s `info["episode"]`).
+    /// Always in the environment's own reward units, also under reward normalisation.
+    pub episode: EpisodeStats,
+    /// The info of the reset that started the next episode (SB3's `reset_infos[i]`). The final
+    /// step's info is the environment's entry of [`VecStep::infos`].
+    pub reset_info: Info,
+}
+
+/// The result of [`VectorEnv::step`]: contiguous batches borrowed from the vector environment,
+/// valid until its next call.
+#[derive(Clone, Copy, Debug)]
+pub struct VecStep<'a> {
+    /// `num_envs × obs_dim` values, row-major. For an environment whose episode ended at this
+    /// step, its row is the first observation of the next episode (see
+    /// [`Self::episode_ends`]).
+    pub observations: &'a [f32],
+    /// One reward per environment.
+    pub rewards: &'a [f32],
+    /// The episode reached a terminal state of the task.
+    pub terminated: &'a [bool],
+    /// The episode was cut for a reason outside the task (time limit, non-finite physics).
+    pub truncated: &'a [bool],
+    /// The info of each environment's step; for a finished episode, its final info.
+    pub infos: &'a [Info],
+    /// `Some` exactly for the environments whose episode ended at this step.
+    pub episode_ends: &'a [Option<EpisodeEnd>],
+    /// Values per observation row.
+    pub obs_dim: usize,
+}
+
+impl<'a> VecStep<'a> {
+    pub fn num_envs(&self) -> usize {
+        self.rewards.len()
+    }
+
+    /// Environment `i`'s observation row.
+    ///
+    /// # Panics
+    /// When `i >= num_envs()`.
+    pub fn obs(&self, i: usize) -> &'a [f32] {
+        &self.observations[i * self.obs_dim..(i + 1) * self.obs_dim]
+    }
+
+    /// Whether environment `i`'s episode ended (terminated or truncated) at this step.
+    pub fn done(&self, i: usize) -> bool {
+        self.terminated[i] || self.truncated[i]
+    }
+
+    /// The last observation of the episode environment `i` finished at this step.
+    pub fn terminal_observation(&self, i: usize) -> Option<&'a [f32]> {
+        self.episode_ends[i]
+            .as_ref()
+            .map(|e| e.terminal_observation.as_slice())
+    }
+
+    /// The statistics of the episode environment `i` finished at this step.
+    pub fn episode(&self, i: usize) -> Option<&'a EpisodeStats> {
+        self.episode_ends[i].as_ref().map(|e| &e.episode)
+    }
+}
+
+/// A batch of environments stepped together (SB3's `VecEnv` interface), implemented by
+/// [`VecEnv`] and by vector wrappers such as [`crate::wrappers::VecNormalize`].
+pub trait VectorEnv {
+    /// Number of environments.
+    fn num_envs(&self) -> usize;
+
+    /// The observation space of one environment.
+    fn observation_space(&self) -> &BoxSpace;
+
+    /// The action space of one environment.
+    fn action_space(&self) -> &BoxSpace;
+
+    /// Values per observation row.
+    fn obs_dim(&self) -> usize {
+        self.observation_space().dim()
+    }
+
+    /// Values per action row.
+    fn act_dim(&self) -> usize {
+        self.action_space().dim()
+    }
+
+    /// Resets every environment: `Some(seed)` resets environment `i` with `seed + i`
+    /// (wrapping), `None` continues each environment's random stream. Returns the
+    /// `num_envs × obs_dim` first observations.
+    ///
+    /// Pass a seed on the first reset: environments that draw their initial stream from a fixed
+    /// default (like [`crate::GraspEnv`]) would otherwise all play the same episodes.
+    fn reset(&mut self, seed: Option<u64>) -> Result<&[f32]>;
+
+    /// Resets environment `index` alone (e.g. to recover after its step failed) and returns its
+    /// first observation.
+    fn reset_env(&mut self, index: usize, seed: Option<u64>) -> Result<&[f32]>;
+
+    /// The infos of the most recent reset of each environment, including automatic ones.
+    fn reset_infos(&self) -> &[Info];
+
+    /// The current `num_envs × obs_dim` observations (those last returned).
+    fn observations(&self) -> &[f32];
+
+    /// Steps every environment with its row of `actions` (`num_envs × act_dim` values,
+    /// row-major) and resets those whose episode ends.
+    ///
+    /// Errors name the environment. A wrong number of values, or a NaN or infinite value in any
+    /// row, is rejected before any environment is stepped. When an environment's own step (or
+    /// automatic reset) fails or panics, the others are stepped as usual, the error names the
+    /// failed environment, and that environment must be reset (with [`Self::reset_env`] or
+    /// [`Self::reset`]) before the next step.
+    fn step(&mut self, actions: &[f32]) -> Result<VecStep<'_>>;
+
+    /// Releases the environments' resources.
+    fn close(&mut self) {}
+}
+
+/// One environment and its bookkeeping.
+struct Slot<E> {
+    env: E,
+    episode: EpisodeAccumulator,
+    /// Why the environment cannot be stepped before a reset (never reset, failed step).
+    needs_reset: Option<&'static str>,
+}
+
+/// What one environment's step produced.
+struct Outcome {
+    obs: Vec<f32>,
+    reward: f32,
+    terminated: bool,
+    truncated: bool,
+    info: Info,
+    end: Option<EpisodeEnd>,
+}
+
+/// Prefixes an environment's error with its index, keeping the error's kind where it carries a
+/// message.
+fn in_env(index: usize, error: EnvError) -> EnvError {
+    match error {
+        EnvError::Action(m) => EnvError::Action(format!("env {index}: {m}")),
+        EnvError::Usage(m) => EnvError::Usage(format!("env {index}: {m}")),
+        EnvError::Config { key, problem } => EnvError::Config {
+            key,
+            problem: format!("{problem} (env {index})"),
+        },
+        EnvError::File { path, problem } => EnvError::File {
+            path,
+            problem: format!("{problem} (env {index})"),
+        },
+        other => EnvError::Usage(format!("env {index}: {other}")),
+    }
+}
+
+/// Appends a note to an error's message.
+fn with_note(error: EnvError, note: &str) -> EnvError {
+    match error {
+        EnvError::Action(m) => EnvError::Action(format!("{m} {note}")),
+        EnvError::Usage(m) => EnvError::Usage(format!("{m} {note}")),
+        EnvError::Config { key, problem } => EnvError::Config {
+            key,
+            problem: format!("{problem} {note}"),
+        },
+        EnvError::File { path, problem } => EnvError::File {
+            path,
+            problem: format!("{problem} {note}"),
+        },
+        other => EnvError::Usage(format!("{other} {note}")),
+    }
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "(no message)".to_string()
+    }
+}
+
+/// Runs `f`, turning a panic into an error that names environment `index`.
+fn guarded<T>(index: usize, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(result) => result.map_err(|e| in_env(index, e)),
+        Err(payload) => Err(EnvError::Usage(format!(
+            "env {index} panicked during {what}: {}",
+            panic_message(payload.as_ref())
+        ))),
+    }
+}
+
+impl<E: Env> Slot<E> {
+    fn check_obs(index: usize, obs: &[f32], obs_dim: usize) -> Result<()> {
+        if obs.len() == obs_dim {
+            Ok(())
+        } else {
+            Err(EnvError::Usage(format!(
+                "env {index} returned an observation of {} values; its space has {obs_dim}",
+                obs.len()
+            )))
+        }
+    }
+
+    fn reset(&mut self, index: usize, seed: Option<u64>, obs_dim: usize) -> Result<(Vec<f32>, Info)> {
+        self.needs_reset = Some("its last reset failed");
+        self.episode = EpisodeAccumulator::default();
+        let (obs, info) = guarded(index, "reset", || self.env.reset(seed))?;
+        Self::check_obs(index, &obs, obs_dim)?;
+        self.needs_reset = None;
+        Ok((obs, info))
+    }
+
+    fn step(&mut self, index: usize, action: &[f32], obs_dim: usize) -> Result<Outcome> {
+        let step = match guarded(index, "step", || self.env.step(action)) {
+            Ok(step) => step,
+            Err(e) => {
+                self.needs_reset = Some("its last step failed");
+                return Err(e);
+            }
+        };
+        if let Err(e) = Self::check_obs(index, &step.obs, obs_dim) {
+            self.needs_reset = Some("its last step failed");
+            return Err(e);
+        }
+        self.episode.add(step.reward);
+        if !(step.terminated || step.truncated) {
+            return Ok(Outcome {
+                obs: step.obs,
+                reward: step.reward,
+                terminated: false,
+                truncated: false,
+                info: step.info,
+                end: None,
+            });
+        }
+        let episode = self.episode.finish(step.info.success);
+        let (obs, reset_info) = self
+            .reset(index, None, obs_dim)
+            .map_err(|e| with_note(e, "(in the automatic reset after its episode ended)"))?;
+        Ok(Outcome {
+            obs,
+            reward: step.reward,
+            terminated: step.terminated,
+            truncated: step.truncated,
+            info: step.info,
+            end: Some(EpisodeEnd {
+                terminal_observation: step.obs,
+                episode,
+                reset_info,
+            }),
+        })
+    }
+}
+
+/// N environments stepped in parallel, with automatic resets (see the [module](self)
+/// documentation).
+///
+/// ```no_run
+/// use fairgrasp_env::{EnvConfig, GraspEnv, VecEnv, VectorEnv};
+/// # fn main() -> fairgrasp_env::Result<()> {
+/// let envs = (0..8)
+///     .map(|_| GraspEnv::new(EnvConfig::default()))
+///     .collect::<Result<Vec<_>, _>>()?;
+/// let mut venv = VecEnv::new(envs, 2)?;
+/// venv.reset(Some(42))?;
+/// let actions = vec![0.0; venv.num_envs() * venv.act_dim()];
+/// let step = venv.step(&actions)?;
+/// for i in 0..step.num_envs() {
+///     if let Some(end) = &step.episode_ends[i] {
+///         println!("env {i}: return {}", end.episode.episode_return);
+///     }
+/// }
+/// # Ok(())
+/// # }
+/// ```
+pub struct VecEnv<E: Env> {
+    slots: Vec<Slot<E>>,
+    /// `None`: step on the caller's thread.
+    pool: Option<rayon::ThreadPool>,
+    threads: usize,
+    observation_space: BoxSpace,
+    action_space: BoxSpace,
+    observations: Vec<f32>,
+    rewards: Vec<f32>,
+    terminated: Vec<bool>,
+    truncated: Vec<bool>,
+    infos: Vec<Info>,
+    reset_infos: Vec<Info>,
+    episode_ends: Vec<Option<EpisodeEnd>>,
+}
+
+impl<E: Env> VecEnv<E> {
+    /// Wraps `envs`, which must be at least one and share their observation and action spaces.
+    ///
+    /// `num_threads` is the number of worker threads: `1` steps the environments one after the
+    /// other on the caller's thread (no pool); `0` uses one thread per available CPU; more
+    /// threads than environments are not started. The environments must be reset (with
+    /// [`VectorEnv::reset`]) before the first step.
+    pub fn new(envs: Vec<E>, num_threads: usize) -> Result<Self> {
+        let Some(first) = envs.first() else {
+            return Err(EnvError::Usage(
+                "a vector environment needs at least one environment".into(),
+            ));
+        };
+        let observation_space = first.observation_space().clone();
+        let action_space = first.action_space().clone();
+        for (i, env) in envs.iter().enumerate().skip(1) {
+            if *env.observation_space() != observation_space {
+                return Err(EnvError::Usage(format!(
+                    "env {i}'s observation space differs from env 0's: {:?} vs {:?}",
+                    env.observation_space().shape,
+                    observation_space.shape
+                )));
+            }
+            if *env.action_space() != action_space {
+                return Err(EnvError::Usage(format!(
+                    "env {i}'s action space differs from env 0's: [{:?}, {:?}] vs [{:?}, {:?}]",
+                    env.action_space().low,
+                    env.action_space().high,
+                    action_space.low,
+                    action_space.high
+                )));
+            }
+        }
+        let n = envs.len();
+        let wanted = if num_threads == 0 {
+            std::thread::available_parallelism().map_or(1, |p| p.get())
+        } else {
+            num_threads
+        };
+        let threads = wanted.min(n).max(1);
+        let pool = if threads > 1 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .thread_name(|i| format!("fairgrasp-vecenv-{i}"))
+                    .build()
+                    .map_err(|e| {
+                        EnvError::Usage(format!("cannot start {threads} worker threads: {e}"))
+                    })?,
+            )
+        } else {
+            None
+        };
+        let obs_dim = observation_space.dim();
+        Ok(Self {
+            slots: envs
+                .into_iter()
+                .map(|env| Slot {
+                    env,
+                    episode: EpisodeAccumulator::default(),
+                    needs_reset: Some("it has not been reset yet"),
+                })
+                .collect(),
+            pool,
+            threads,
+            observation_space,
+            action_space,
+            observations: vec![0.0; n * obs_dim],
+            rewards: vec![0.0; n],
+            terminated: vec![false; n],
+            truncated: vec![false; n],
+            infos: vec![Info::default(); n],
+            reset_infos: vec![Info::default(); n],
+            episode_ends: vec![None; n],
+        })
+    }
+
+    /// The number of threads stepping the environments (1: the caller's thread).
+    pub fn num_threads(&self) -> usize {
+        self.threads
+    }
+
+    /// The environments, in order.
+    pub fn envs(&self) -> impl ExactSizeIterator<Item = &E> {
+        self.slots.iter().map(|s| &s.env)
+    }
+
+    /// Environment `i`, if there is one.
+    pub fn env(&self, i: usize) -> Option<&E> {
+        self.slots.get(i).map(|s| &s.env)
+    }
+
+    /// Environment `i`, mutably (e.g. to render it). Resetting or stepping it directly puts it
+    /// out of step with the vector environment's buffers and episode statistics.
+    pub fn env_mut(&mut self, i: usize) -> Option<&mut E> {
+        self.slots.get_mut(i).map(|s| &mut s.env)
+    }
+
+    /// The environments, giving up the vector environment.
+    pub fn into_envs(self) -> Vec<E> {
+        self.slots.into_iter().map(|s| s.env).collect()
+    }
+
+    /// Runs `f` on every environment, on the pool when there is one; results in index order.
+    fn run<T: Send>(&mut self, f: impl Fn(usize, &mut Slot<E>) -> T + Sync + Send) -> Vec<T> {
+        match &self.pool {
+            None => self
+                .slots
+                .iter_mut()
+                .enumerate()
+                .map(|(i, s)| f(i, s))
+                .collect(),
+            Some(pool) => {
+                let slots = &mut self.slots;
+                pool.install(|| {
+                    slots
+                        .par_iter_mut()
+                        .enumerate()
+                        .map(|(i, s)| f(i, s))
+                        .collect()
+                })
+            }
+        }
+    }
+
+    /// Turns per-environment failures into one error naming the first failed environment and
+    /// listing the others.
+    fn first_error(errors: Vec<(usize, EnvError)>) -> Result<()> {
+        let mut errors = errors.into_iter();
+        let Some((_, first)) = errors.next() else {
+            return Ok(());
+        };
+        let others: Vec<String> = errors.map(|(i, _)| i.to_string()).collect();
+        Err(if others.is_empty() {
+            first
+        } else {
+            with_note(first, &format!("(envs {} failed too)", others.join(", ")))
+        })
+    }
+
+    fn check_actions(&self, actions: &[f32]) -> Result<()> {
+        let (n, act_dim) = (self.slots.len(), self.action_space.dim());
+        if actions.len() != n * act_dim {
+            return Err(EnvError::Action(format!(
+                "expected {n} envs × {act_dim} values = {} action values, got {}",
+                n * act_dim,
+                actions.len()
+            )));
+        }
+        let bad: Vec<(usize, EnvError)> = actions
+            .chunks_exact(act_dim.max(1))
+            .enumerate()
+            .filter_map(|(i, row)| {
+                row.iter().position(|v| !v.is_finite()).map(|j| {
+                    (
+                        i,
+                        EnvError::Action(format!(
+                            "env {i}: value {j} is {}; actions must be finite",
+                            row[j]
+                        )),
+                    )
+                })
+            })
+            .collect();
+        Self::first_error(bad)
+    }
+}
+
+impl<E: Env> VectorEnv for VecEnv<E> {
+    fn num_envs(&self) -> usize {
+        self.slots.len()
+    }
+
+    fn observation_space(&self) -> &BoxSpace {
+        &self.observation_space
+    }
+
+    fn action_space(&self) -> &BoxSpace {
+        &self.action_space
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Result<&[f32]> {
+        let obs_dim = self.observation_space.dim();
+        let results = self.run(|i, slot| slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), obs_dim));
+        let mut errors = Vec::new();
+        for (i, result) in results.into_iter().enumerate() {
+            self.episode_ends[i] = None;
+            self.rewards[i] = 0.0;
+            self.terminated[i] = false;
+            self.truncated[i] = false;
+            match result {
+                Ok((obs, info)) => {
+                    self.observations[i * obs_dim..(i + 1) * obs_dim].copy_from_slice(&obs);
+                    self.reset_infos[i] = info;
+                }
+                Err(e) => errors.push((i, e)),
+            }
+        }
+        Self::first_error(errors)?;
+        Ok(&self.observations)
+    }
+
+    fn reset_env(&mut self, index: usize, seed: Option<u64>) -> Result<&[f32]> {
+        let n = self.slots.len();
+        let obs_dim = self.observation_space.dim();
+        let slot = self.slots.get_mut(index).ok_or_else(|| {
+            EnvError::Usage(format!("env {index} does not exist; there are {n}"))
+        })?;
+        let (obs, info) = slot.reset(index, seed, obs_dim)?;
+        let row = &mut self.observations[index * obs_dim..(index + 1) * obs_dim];
+        row.copy_from_slice(&obs);
+        self.reset_infos[index] = info;
+        self.episode_ends[index] = None;
+        Ok(row)
+    }
+
+    fn reset_infos(&self) -> &[Info] {
+        &self.reset_infos
+    }
+
+    fn observations(&self) -> &[f32] {
+        &self.observations
+    }
+
+    fn step(&mut self, actions: &[f32]) -> Result<VecStep<'_>> {
+        if let Some((i, why)) = self
+            .slots
+            .iter()
+            .enumerate()
+            .find_map(|(i, s)| s.needs_reset.map(|why| (i, why)))
+        {
+            return Err(EnvError::Usage(format!(
+                "env {i} must be reset before stepping ({why}): call reset() or reset_env({i}, seed)"
+            )));
+        }
+        self.check_actions(actions)?;
+        let (obs_dim, act_dim) = (self.observation_space.dim(), self.action_space.dim());
+        let outcomes = self.run(|i, slot| {
+            slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], obs_dim)
+        });
+        let mut errors = Vec::new();
+        for (i, outcome) in outcomes.into_iter().enumerate() {
+            match outcome {
+                Ok(o) => {
+                    self.observations[i * obs_dim..(i + 1) * obs_dim].copy_from_slice(&o.obs);
+                    self.rewards[i] = o.reward;
+                    self.terminated[i] = o.terminated;
+                    self.truncated[i] = o.truncated;
+                    self.infos[i] = o.info;
+                    if let Some(end) = &o.end {
+                        self.reset_infos[i] = end.reset_info.clone();
+                    }
+                    self.episode_ends[i] = o.end;
+                }
+                Err(e) => {
+                    self.episode_ends[i] = None;
+                    errors.push((i, e));
+                }
+            }
+        }
+        Self::first_error(errors)?;
+        Ok(VecStep {
+            observations: &self.observations,
+            rewards: &self.rewards,
+            terminated: &self.terminated,
+            truncated: &self.truncated,
+            infos: &self.infos,
+            episode_ends: &self.episode_ends,
+            obs_dim,
+        })
+    }
+
+    fn close(&mut self) {
+        for slot in &mut self.slots {
+            slot.env.close();
+            slot.needs_reset = Some("it was closed");
+        }
+    }
+}
