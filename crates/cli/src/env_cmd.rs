@@ -38,6 +38,8 @@ pub enum EnvCommand {
     Random(RandomArgs),
     /// The scripted grasp policy driven through step(): success rate.
     Scripted(ScriptedArgs),
+    /// Print the effective configuration as TOML (the defaults, with --config/--set applied).
+    Config(EnvArgs),
 }
 
 #[derive(clap::Args)]
@@ -79,6 +81,10 @@ pub fn run(command: EnvCommand) -> Result<()> {
         EnvCommand::Check(args) => check(&args),
         EnvCommand::Random(args) => random(&args),
         EnvCommand::Scripted(args) => scripted(&args),
+        EnvCommand::Config(args) => {
+            print!("{}", args.env_config()?.to_toml_string());
+            Ok(())
+        }
     }
 }
 

@@ -367,7 +367,7 @@ impl EnvConfig {
 
     /// The configuration as TOML text (e.g. to save it beside a run).
     pub fn to_toml_string(&self) -> String {
-        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# could not serialise: {e}\n"))
+        toml::to_string(self).unwrap_or_else(|e| format!("# could not serialise: {e}\n"))
     }
 }
 

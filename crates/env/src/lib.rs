@@ -6,7 +6,12 @@
 //! - [`spaces`]: Gymnasium's `Box`;
 //! - [`grasp`]: `FaArmGrasp-v0`, the grasp task;
 //! - [`config`]: every knob, from TOML, overridable by dotted keys;
-//! - [`observation`]: the `seed23` and `rich` observation layouts.
+//! - [`observation`]: the `seed23` and `rich` observation layouts;
+//! - [`vector`]: [`VecEnv`], N environments stepped in parallel with automatic resets, behind
+//!   the [`VectorEnv`] interface;
+//! - [`wrappers`]: [`RescaleAction`], [`RecordEpisodeStatistics`] and [`VecNormalize`], as in
+//!   Gymnasium and Stable-Baselines3;
+//! - [`running_stats`]: [`RunningMeanStd`], SB3's running mean and variance.
 
 pub mod check;
 pub mod config;
@@ -14,11 +19,20 @@ pub mod core;
 pub mod error;
 pub mod grasp;
 pub mod observation;
+pub mod running_stats;
 pub mod scripted;
 pub mod spaces;
+pub mod vector;
+pub mod wrappers;
 
 pub use crate::core::{Env, EpisodeEvent, Info, Step};
 pub use config::EnvConfig;
 pub use error::{EnvError, Result};
 pub use fairgrasp_sim as sim;
 pub use grasp::{ENV_ID, GraspEnv};
+pub use running_stats::RunningMeanStd;
+pub use vector::{EpisodeEnd, VecEnv, VecStep, VectorEnv};
+pub use wrappers::{
+    EpisodeStats, RecordEpisodeStatistics, RescaleAction, VecNormalize, VecNormalizeConfig,
+    VecNormalizeState,
+};

@@ -263,7 +263,9 @@ mod tests {
 
     #[test]
     fn batched_updates_equal_one_pass_over_all_data() {
-        let data: Vec<f32> = (0..300).map(|i| ((i * 37) % 101) as f32 * 0.25 - 7.0).collect();
+        let data: Vec<f32> = (0..300)
+            .map(|i| ((i * 37) % 101) as f32 * 0.25 - 7.0)
+            .collect();
         let mut batched = RunningMeanStd::with_count_epsilon(3, f64::MIN_POSITIVE);
         for chunk in data.chunks(3 * 7) {
             batched.update(chunk);
@@ -289,7 +291,12 @@ mod tests {
         s.update(&[1.0f64 / 3.0, 2.0f64.sqrt(), 1e-300, 1e300]);
         let text = serde_json::to_string(&s).unwrap();
         let back: RunningMeanStd = serde_json::from_str(&text).unwrap();
-        for (a, b) in s.mean().iter().chain(s.var()).zip(back.mean().iter().chain(back.var())) {
+        for (a, b) in s
+            .mean()
+            .iter()
+            .chain(s.var())
+            .zip(back.mean().iter().chain(back.var()))
+        {
             assert_eq!(a.to_bits(), b.to_bits(), "{text}");
         }
         assert_eq!(s.count().to_bits(), back.count().to_bits());

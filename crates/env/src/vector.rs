@@ -234,7 +234,12 @@ impl<E: Env> Slot<E> {
         }
     }
 
-    fn reset(&mut self, index: usize, seed: Option<u64>, obs_dim: usize) -> Result<(Vec<f32>, Info)> {
+    fn reset(
+        &mut self,
+        index: usize,
+        seed: Option<u64>,
+        obs_dim: usize,
+    ) -> Result<(Vec<f32>, Info)> {
         self.needs_reset = Some("its last reset failed");
         self.episode = EpisodeAccumulator::default();
         let (obs, info) = guarded(index, "reset", || self.env.reset(seed))?;
@@ -505,7 +510,8 @@ impl<E: Env> VectorEnv for VecEnv<E> {
 
     fn reset(&mut self, seed: Option<u64>) -> Result<&[f32]> {
         let obs_dim = self.observation_space.dim();
-        let results = self.run(|i, slot| slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), obs_dim));
+        let results =
+            self.run(|i, slot| slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), obs_dim));
         let mut errors = Vec::new();
         for (i, result) in results.into_iter().enumerate() {
             self.episode_ends[i] = None;
@@ -527,9 +533,10 @@ impl<E: Env> VectorEnv for VecEnv<E> {
     fn reset_env(&mut self, index: usize, seed: Option<u64>) -> Result<&[f32]> {
         let n = self.slots.len();
         let obs_dim = self.observation_space.dim();
-        let slot = self.slots.get_mut(index).ok_or_else(|| {
-            EnvError::Usage(format!("env {index} does not exist; there are {n}"))
-        })?;
+        let slot = self
+            .slots
+            .get_mut(index)
+            .ok_or_else(|| EnvError::Usage(format!("env {index} does not exist; there are {n}")))?;
         let (obs, info) = slot.reset(index, seed, obs_dim)?;
         let row = &mut self.observations[index * obs_dim..(index + 1) * obs_dim];
         row.copy_from_slice(&obs);
@@ -559,9 +566,8 @@ impl<E: Env> VectorEnv for VecEnv<E> {
         }
         self.check_actions(actions)?;
         let (obs_dim, act_dim) = (self.observation_space.dim(), self.action_space.dim());
-        let outcomes = self.run(|i, slot| {
-            slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], obs_dim)
-        });
+        let outcomes =
+            self.run(|i, slot| slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], obs_dim));
         let mut errors = Vec::new();
         for (i, outcome) in outcomes.into_iter().enumerate() {
             match outcome {

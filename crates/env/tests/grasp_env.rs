@@ -318,3 +318,9 @@ fn ansi_rendering_describes_the_state() {
     }
     assert!(env_with(|_| {}).render().unwrap().is_none());
 }
+
+#[test]
+fn the_documented_env_config_is_the_default() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/env.toml");
+    assert_eq!(EnvConfig::load(&path, &[]).unwrap(), EnvConfig::default());
+}
