@@ -487,10 +487,11 @@ impl Env for GraspEnv {
     }
 
     fn render(&mut self) -> Result<Option<Frame>> {
-        Ok(match self.config.task.render_mode {
-            Some(RenderMode::Ansi) => Some(Frame::Text(self.render_text())),
-            None => None,
-        })
+        Ok(self
+            .config
+            .task
+            .render_mode
+            .map(|RenderMode::Ansi| Frame::Text(self.render_text())))
     }
 
     fn close(&mut self) {

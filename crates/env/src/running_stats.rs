@@ -115,7 +115,7 @@ impl RunningMeanStd {
             return;
         }
         assert!(
-            batch.len() % dim == 0,
+            batch.len().is_multiple_of(dim),
             "RunningMeanStd::update: {} values is not a whole number of {dim}-vectors",
             batch.len()
         );

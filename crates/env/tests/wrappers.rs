@@ -292,12 +292,18 @@ fn random_actions(rng: &mut ChaCha8Rng, n: usize) -> Vec<f32> {
     (0..n * 3).map(|_| rng.random_range(-2.5..2.5)).collect()
 }
 
-/// Mean and population variance of column `j` of row-major `rows`.
-fn column_moments(rows: &[f64], dim: usize, j: usize) -> (f64, f64) {
+/// Mean and population variance of column `j` of row-major `rows`, and what SB3's
+/// `RunningMeanStd` holds after seeing them: the data merged with its prior (mean 0, variance 1,
+/// pseudo-count 1e-4).
+fn column_moments(rows: &[f64], dim: usize, j: usize) -> ((f64, f64), (f64, f64)) {
     let xs: Vec<f64> = rows.iter().skip(j).step_by(dim).copied().collect();
-    let m = xs.iter().sum::<f64>() / xs.len() as f64;
-    let v = xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / xs.len() as f64;
-    (m, v)
+    let n = xs.len() as f64;
+    let m = xs.iter().sum::<f64>() / n;
+    let v = xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n;
+    let (c0, total) = (1e-4, n + 1e-4);
+    let prior_mean = n * m / total;
+    let prior_var = (c0 * 1.0 + n * v + m * m * c0 * n / total) / total;
+    ((m, v), (prior_mean, prior_var))
 }
 
 #[test]
@@ -369,15 +375,15 @@ fn vec_normalize_learns_the_observation_and_return_statistics() {
     }
     assert_eq!(ends, n * 1500 / 25);
 
-    // The running statistics equal the moments of everything seen (the pseudo-count of 1e-4
-    // shifts them by ~1e-8 relative), and those match the generating distribution.
+    // The running statistics equal the moments of everything seen, merged with SB3's prior, and
+    // match the generating distribution.
     let obs_rms = venv.obs_rms();
     assert!((obs_rms.count() - (1e-4 + (n * 1501) as f64)).abs() < 1e-6);
     let (means, stds) = ([1.0, -2.0, 5.0], [0.5f64, 2.0, 0.1]);
     for j in 0..3 {
-        let (m, v) = column_moments(&all_obs, 3, j);
-        assert!((obs_rms.mean()[j] - m).abs() < 1e-6 * stds[j], "mean {j}");
-        assert!((obs_rms.var()[j] / v - 1.0).abs() < 1e-6, "var {j}");
+        let (_, (m, v)) = column_moments(&all_obs, 3, j);
+        assert!((obs_rms.mean()[j] - m).abs() < 1e-9 * stds[j], "mean {j}");
+        assert!((obs_rms.var()[j] / v - 1.0).abs() < 1e-9, "var {j}");
         let sem = stds[j] / ((n * 1501) as f64).sqrt();
         assert!(
             (obs_rms.mean()[j] - means[j]).abs() < 5.0 * sem,
@@ -392,10 +398,10 @@ fn vec_normalize_learns_the_observation_and_return_statistics() {
             stds[j] * stds[j]
         );
     }
-    let (rm, rv) = column_moments(&all_returns, 1, 0);
+    let (_, (rm, rv)) = column_moments(&all_returns, 1, 0);
     let ret_rms = venv.ret_rms();
-    assert!((ret_rms.mean()[0] - rm).abs() < 1e-6 * rv.sqrt());
-    assert!((ret_rms.var()[0] / rv - 1.0).abs() < 1e-6);
+    assert!((ret_rms.mean()[0] - rm).abs() < 1e-9 * rv.sqrt());
+    assert!((ret_rms.var()[0] / rv - 1.0).abs() < 1e-9);
     assert!((ret_rms.count() - (1e-4 + (n * 1500) as f64)).abs() < 1e-6);
 
     // Single observations; bad lengths are errors.

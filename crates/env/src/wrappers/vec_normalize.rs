@@ -193,7 +193,7 @@ impl VecNormalizeState {
 
     fn check_rows(&self, obs: &[f32]) -> Result<()> {
         let dim = self.obs_dim();
-        if obs.is_empty() || dim == 0 || obs.len() % dim != 0 {
+        if obs.is_empty() || dim == 0 || !obs.len().is_multiple_of(dim) {
             return Err(EnvError::Usage(format!(
                 "VecNormalize: expected one or more {dim}-value observations, got {} values",
                 obs.len()
@@ -331,6 +331,10 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 ///   statistics for evaluation: [`Self::load`] starts in training mode, as SB3's does);
 /// - [`Self::save`] / [`Self::load`] keep the settings and statistics in a JSON file, written
 ///   atomically (SB3 pickles; the running returns are not saved, as in SB3).
+///
+/// When the wrapped environment's `step` fails, nothing here is updated: the buffers keep the
+/// previous step's values until the next `reset` (or `reset_env` of the failed environment and
+/// a successful step).
 pub struct VecNormalize<V> {
     venv: V,
     state: VecNormalizeState,
