@@ -5,14 +5,34 @@
 
 use crate::SceneArgs;
 use anyhow::Result;
+use fairgrasp_env::{Env, EnvConfig, GraspEnv, VecEnv, VectorEnv};
 use fairgrasp_sim::pick::{PickScript, grasp_and_lift};
 use fairgrasp_sim::scene::Scene;
+use rand::SeedableRng;
 use std::time::Instant;
 
 #[derive(clap::Subcommand)]
 pub enum BenchCommand {
     /// Physics steps per second of the full scene and scene resets per second.
     Physics(PhysicsBenchArgs),
+    /// Environment steps per second with random actions: one env on one thread, and the
+    /// vectorised env on 1 and 2 threads.
+    Env(EnvBenchArgs),
+}
+
+#[derive(clap::Args)]
+pub struct EnvBenchArgs {
+    /// Seconds of wall time per measurement.
+    #[arg(long, default_value_t = 3.0)]
+    pub seconds: f64,
+    /// Environments in the vectorised measurements.
+    #[arg(long, default_value_t = 8)]
+    pub num_envs: usize,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub env: crate::env_cmd::EnvArgs,
 }
 
 #[derive(clap::Args)]
@@ -30,6 +50,7 @@ pub struct PhysicsBenchArgs {
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Physics(args) => physics(&args),
+        BenchCommand::Env(args) => env(&args),
     }
 }
 
@@ -104,6 +125,72 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
         println!("  physics steps/s, cube grasped and lifted    : {grasp_rate:>10.0}");
         println!("  resets/s (new placement, IK check, settle)   : {reset_rate:>10.0}");
         println!("  snapshot restores/s                          : {restore_rate:>10.0}");
+    }
+    Ok(())
+}
+
+/// Env steps per second of `num_envs` environments on `threads` threads (1 env: no vectorisation).
+fn env_rate(config: &EnvConfig, num_envs: usize, threads: usize, seconds: f64) -> Result<f64> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    if num_envs == 1 {
+        let mut env = GraspEnv::new(config.clone())?;
+        env.reset(Some(0))?;
+        let space = env.action_space().clone();
+        let per_call = rate(seconds, || {
+            let step = env.step(&space.sample(&mut rng))?;
+            if step.terminated || step.truncated {
+                env.reset(None)?;
+            }
+            Ok(())
+        })?;
+        return Ok(per_call);
+    }
+    let envs = (0..num_envs)
+        .map(|_| GraspEnv::new(config.clone()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut venv = VecEnv::new(envs, threads)?;
+    venv.reset(Some(0))?;
+    let space = venv.action_space().clone();
+    let mut actions = Vec::new();
+    let per_call = rate(seconds, || {
+        actions.clear();
+        for _ in 0..num_envs {
+            actions.extend(space.sample(&mut rng));
+        }
+        venv.step(&actions)?;
+        Ok(())
+    })?;
+    Ok(per_call * num_envs as f64)
+}
+
+fn env(args: &EnvBenchArgs) -> Result<()> {
+    anyhow::ensure!(args.seconds > 0.0, "--seconds must be positive");
+    anyhow::ensure!(args.num_envs >= 2, "--num-envs must be at least 2");
+    let config = args.env.env_config()?;
+    let single = env_rate(&config, 1, 1, args.seconds)?;
+    let vec1 = env_rate(&config, args.num_envs, 1, args.seconds)?;
+    let vec2 = env_rate(&config, args.num_envs, 2, args.seconds)?;
+    let control_hz = 1.0 / (config.scene.physics.dt * config.scene.physics.substeps as f32);
+    if args.json {
+        println!(
+            "{{\"control_hz\": {control_hz:.1}, \"substeps\": {}, \"env_steps_per_s_single\": {single:.0}, \"env_steps_per_s_vec_1_thread\": {vec1:.0}, \"env_steps_per_s_vec_2_threads\": {vec2:.0}, \"num_envs\": {}}}",
+            config.scene.physics.substeps, args.num_envs
+        );
+    } else {
+        println!(
+            "FaArmGrasp-v0, random actions, control {control_hz:.0} Hz ({} physics steps per env step):",
+            config.scene.physics.substeps
+        );
+        println!("  one env, one thread                 : {single:>8.0} env steps/s");
+        println!(
+            "  vectorised, {} envs, 1 thread         : {vec1:>8.0} env steps/s",
+            args.num_envs
+        );
+        println!(
+            "  vectorised, {} envs, 2 threads        : {vec2:>8.0} env steps/s  ({:.2}x one thread)",
+            args.num_envs,
+            vec2 / vec1
+        );
     }
     Ok(())
 }

@@ -4,7 +4,7 @@ use anyhow::{Context, Result};
 use fairgrasp_env::check::{CheckReport, check_env};
 use fairgrasp_env::config::{ActionMode, EnvConfig, ObservationPreset, RewardKind};
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
-use fairgrasp_env::{Env, EpisodeEvent, GraspEnv};
+use fairgrasp_env::{Env, EpisodeEvent, GraspEnv, Info, VecEnv, VectorEnv};
 use rand::SeedableRng;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -58,10 +58,17 @@ pub struct CheckArgs {
 
 #[derive(clap::Args)]
 pub struct RandomArgs {
+    /// Total environment steps (over all environments).
     #[arg(long, default_value_t = 10_000)]
     pub steps: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Environments stepped together (a vectorised env when above 1).
+    #[arg(long, default_value_t = 1)]
+    pub num_envs: usize,
+    /// Worker threads of the vectorised env.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
     #[command(flatten)]
     pub env: EnvArgs,
 }
@@ -161,17 +168,21 @@ fn check(args: &CheckArgs) -> Result<()> {
 }
 
 fn random(args: &RandomArgs) -> Result<()> {
+    anyhow::ensure!(args.num_envs >= 1, "--num-envs must be at least 1");
     let config = args.env.env_config()?;
-    let mut env = GraspEnv::new(config)?;
+    let substeps = config.scene.physics.substeps as f64;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
-    env.reset(Some(args.seed))?;
     let mut stats = RolloutStats::default();
-    let mut episode_return = 0.0f64;
     let started = Instant::now();
-    for _ in 0..args.steps {
-        let action = env.action_space().sample(&mut rng);
-        let step =
-            match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| env.step(&action))) {
+    if args.num_envs == 1 {
+        let mut env = GraspEnv::new(config)?;
+        env.reset(Some(args.seed))?;
+        let mut episode_return = 0.0f64;
+        for _ in 0..args.steps {
+            let action = env.action_space().sample(&mut rng);
+            let step = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                env.step(&action)
+            })) {
                 Ok(step) => step.context("step failed")?,
                 Err(_) => {
                     stats.panics += 1;
@@ -179,23 +190,66 @@ fn random(args: &RandomArgs) -> Result<()> {
                     continue;
                 }
             };
-        stats.steps += 1;
-        if step.obs.iter().any(|v| !v.is_finite()) {
-            stats.nan_observations += 1;
+            stats.steps += 1;
+            if step.obs.iter().any(|v| !v.is_finite()) {
+                stats.nan_observations += 1;
+            }
+            episode_return += step.reward as f64;
+            if step.terminated || step.truncated {
+                stats.end_episode(&step.info, step.truncated, episode_return);
+                episode_return = 0.0;
+                env.reset(None)?;
+            }
         }
-        episode_return += step.reward as f64;
-        if step.terminated || step.truncated {
-            stats.end_episode(&step, episode_return);
-            episode_return = 0.0;
-            env.reset(None)?;
+    } else {
+        let envs = (0..args.num_envs)
+            .map(|_| GraspEnv::new(config.clone()))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut venv = VecEnv::new(envs, args.threads)?;
+        venv.reset(Some(args.seed))?;
+        let n = venv.num_envs();
+        let space = venv.action_space().clone();
+        let mut actions = Vec::with_capacity(n * space.dim());
+        while stats.steps < args.steps {
+            actions.clear();
+            for _ in 0..n {
+                actions.extend(space.sample(&mut rng));
+            }
+            match venv.step(&actions) {
+                Ok(step) => {
+                    stats.steps += n as u64;
+                    stats.nan_observations += step
+                        .observations
+                        .chunks(step.obs_dim)
+                        .filter(|row| row.iter().any(|v| !v.is_finite()))
+                        .count() as u64;
+                    for (i, end) in step.episode_ends.iter().enumerate() {
+                        if let Some(end) = end {
+                            stats.end_episode(
+                                &step.infos[i],
+                                step.truncated[i],
+                                end.episode.episode_return,
+                            );
+                        }
+                    }
+                }
+                Err(e) => {
+                    // An environment failed or panicked; the others stepped. Count and recover.
+                    stats.panics += 1;
+                    eprintln!("warning: {e}");
+                    venv.reset(None)?;
+                }
+            }
         }
     }
     let elapsed = started.elapsed().as_secs_f64();
     println!(
-        "{} random steps in {elapsed:.1} s: {:.0} env steps/s ({:.0} physics steps/s), one env, one thread",
+        "{} random steps in {elapsed:.1} s: {:.0} env steps/s ({:.0} physics steps/s), {} env(s), {} thread(s)",
         stats.steps,
         stats.steps as f64 / elapsed,
-        stats.steps as f64 * env.config().scene.physics.substeps as f64 / elapsed
+        stats.steps as f64 * substeps / elapsed,
+        args.num_envs,
+        if args.num_envs == 1 { 1 } else { args.threads }
     );
     stats.print();
     anyhow::ensure!(
@@ -221,15 +275,15 @@ struct RolloutStats {
 }
 
 impl RolloutStats {
-    fn end_episode(&mut self, step: &fairgrasp_env::Step, episode_return: f64) {
+    fn end_episode(&mut self, info: &Info, truncated: bool, episode_return: f64) {
         self.episodes += 1;
         self.returns += episode_return;
-        self.lengths += step.info.elapsed_steps as u64;
-        if step.info.success {
+        self.lengths += info.elapsed_steps as u64;
+        if info.success {
             self.success += 1;
-        } else if step.info.events.contains(&EpisodeEvent::ObjectOffTable) {
+        } else if info.events.contains(&EpisodeEvent::ObjectOffTable) {
             self.off_table += 1;
-        } else if step.truncated && !step.info.events.contains(&EpisodeEvent::NonFiniteState) {
+        } else if truncated && !info.events.contains(&EpisodeEvent::NonFiniteState) {
             self.time_limit += 1;
         } else {
             self.other += 1;
