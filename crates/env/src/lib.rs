@@ -14,6 +14,7 @@
 //! - [`running_stats`]: [`RunningMeanStd`], SB3's running mean and variance.
 
 pub mod check;
+pub mod classic;
 pub mod config;
 pub mod core;
 pub mod error;
