@@ -1,6 +1,15 @@
-//! Reinforcement learning (PPO, SAC) on top of the grasp environment.
+//! fairgrasp-rl: reinforcement learning for the fairgrasp environments.
 //!
-//! Layer 3 of fairgrasp: it will depend on the environment crate. Built in the training issue; this
-//! crate holds its place in the layout.
+//! Layer 3 of fairgrasp (sim → env → **rl** → deploy). Shared machinery lives here once —
+//! [`buffers`] (rollout buffer with GAE, replay buffer), [`logger`] (TensorBoard event files and
+//! CSV), [`save_util`] (atomic writes) — and each algorithm is a thin module on top.
+//!
+//! Networks run on [candle](https://github.com/huggingface/candle) (CPU); a PPO update on our
+//! network sizes measured 4.8 s with candle against 6.7 s with burn-ndarray, and candle builds in
+//! 2.7 min against 7.8 min (docs/training.md).
 
-pub use fairgrasp_sim as sim;
+pub mod buffers;
+pub mod logger;
+pub mod save_util;
+
+pub use fairgrasp_env as env;
