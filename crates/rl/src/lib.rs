@@ -10,6 +10,8 @@
 
 pub mod buffers;
 pub mod logger;
+pub mod nn;
+pub mod ppo;
 pub mod save_util;
 
 pub use fairgrasp_env as env;

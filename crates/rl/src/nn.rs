@@ -1,0 +1,251 @@
+//! Networks and the optimiser, on candle.
+//!
+//! Adam is written here (a dozen tensor operations) rather than taken from candle-nn because
+//! candle-nn's `AdamW` keeps its moment estimates private, and a resumable checkpoint must save
+//! them.
+
+use candle_core::{DType, Device, Tensor, Var};
+use candle_nn::{Init, Linear, Module, VarBuilder, VarMap};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+
+/// Hidden-layer activation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Activation {
+    Tanh,
+    Relu,
+}
+
+/// A multi-layer perceptron.
+#[derive(Clone, Debug)]
+pub struct Mlp {
+    layers: Vec<Linear>,
+    activation: Activation,
+}
+
+/// A linear layer with weights drawn from N(0, (gain / √fan_in)²) and zero bias.
+fn linear(
+    vb: &VarBuilder,
+    name: &str,
+    fan_in: usize,
+    fan_out: usize,
+    gain: f64,
+) -> candle_core::Result<Linear> {
+    let stdev = gain / (fan_in as f64).sqrt();
+    let weight = vb.get_with_hints(
+        (fan_out, fan_in),
+        &format!("{name}.weight"),
+        Init::Randn { mean: 0.0, stdev },
+    )?;
+    let bias = vb.get_with_hints(fan_out, &format!("{name}.bias"), Init::Const(0.0))?;
+    Ok(Linear::new(weight, Some(bias)))
+}
+
+impl Mlp {
+    /// `input → hidden… → output`; the output layer's weights are scaled by `output_gain`
+    /// (small for policy means, so the first actions are near zero, as CleanRL does).
+    pub fn new(
+        vb: &VarBuilder,
+        input: usize,
+        hidden: &[usize],
+        output: usize,
+        activation: Activation,
+        output_gain: f64,
+    ) -> candle_core::Result<Self> {
+        let mut layers = Vec::new();
+        let mut fan_in = input;
+        for (i, &h) in hidden.iter().enumerate() {
+            layers.push(linear(
+                vb,
+                &format!("l{i}"),
+                fan_in,
+                h,
+                std::f64::consts::SQRT_2,
+            )?);
+            fan_in = h;
+        }
+        layers.push(linear(
+            vb,
+            &format!("l{}", hidden.len()),
+            fan_in,
+            output,
+            output_gain,
+        )?);
+        Ok(Self { layers, activation })
+    }
+
+    pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        let mut x = x.clone();
+        let last = self.layers.len() - 1;
+        for (i, layer) in self.layers.iter().enumerate() {
+            x = layer.forward(&x)?;
+            if i < last {
+                x = match self.activation {
+                    Activation::Tanh => x.tanh()?,
+                    Activation::Relu => x.relu()?,
+                };
+            }
+        }
+        Ok(x)
+    }
+}
+
+/// Adam (Kingma & Ba 2015) over the variables of a [`VarMap`], with its state exposed for
+/// checkpoints.
+pub struct Adam {
+    /// Variables by name, sorted so the order is stable.
+    vars: Vec<(String, Var)>,
+    first: Vec<Tensor>,
+    second: Vec<Tensor>,
+    pub lr: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    pub eps: f64,
+    step: u64,
+}
+
+impl Adam {
+    pub fn new(varmap: &VarMap, lr: f64) -> candle_core::Result<Self> {
+        let mut vars: Vec<(String, Var)> = varmap
+            .data()
+            .lock()
+            .expect("varmap lock")
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        vars.sort_by(|a, b| a.0.cmp(&b.0));
+        let zeros = |v: &Var| v.as_tensor().zeros_like();
+        Ok(Self {
+            first: vars
+                .iter()
+                .map(|(_, v)| zeros(v))
+                .collect::<candle_core::Result<_>>()?,
+            second: vars
+                .iter()
+                .map(|(_, v)| zeros(v))
+                .collect::<candle_core::Result<_>>()?,
+            vars,
+            lr,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            step: 0,
+        })
+    }
+
+    /// One step on `loss`, with the global gradient norm clipped to `max_grad_norm`.
+    /// Returns the gradient norm before clipping.
+    pub fn backward_step(&mut self, loss: &Tensor, max_grad_norm: f64) -> candle_core::Result<f64> {
+        let grads = loss.backward()?;
+        let mut grad_list = Vec::with_capacity(self.vars.len());
+        let mut sq = 0.0f64;
+        for (_, var) in &self.vars {
+            let g = grads.get(var).cloned();
+            if let Some(g) = &g {
+                sq += g.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
+            }
+            grad_list.push(g);
+        }
+        let norm = sq.sqrt();
+        let scale = if max_grad_norm > 0.0 && norm > max_grad_norm {
+            max_grad_norm / (norm + 1e-6)
+        } else {
+            1.0
+        };
+        self.step += 1;
+        let t = self.step as i32;
+        let bias1 = 1.0 - self.beta1.powi(t);
+        let bias2 = 1.0 - self.beta2.powi(t);
+        for (i, g) in grad_list.into_iter().enumerate() {
+            let Some(g) = g else { continue };
+            let g = if scale < 1.0 { (g * scale)? } else { g };
+            let m = ((&self.first[i] * self.beta1)? + (&g * (1.0 - self.beta1))?)?;
+            let v = ((&self.second[i] * self.beta2)? + (g.sqr()? * (1.0 - self.beta2))?)?;
+            let update = ((&m / bias1)? / ((&v / bias2)?.sqrt()? + self.eps)?)?;
+            let var = &self.vars[i].1;
+            var.set(&(var.as_tensor() - (update * self.lr)?)?)?;
+            self.first[i] = m;
+            self.second[i] = v;
+        }
+        Ok(norm)
+    }
+
+    /// The optimiser state as named tensors (for a checkpoint).
+    pub fn state(&self) -> candle_core::Result<HashMap<String, Tensor>> {
+        let mut out = HashMap::new();
+        for (i, (name, _)) in self.vars.iter().enumerate() {
+            out.insert(format!("adam.m.{name}"), self.first[i].clone());
+            out.insert(format!("adam.v.{name}"), self.second[i].clone());
+        }
+        out.insert(
+            "adam.step".into(),
+            Tensor::new(&[self.step as f64], &Device::Cpu)?,
+        );
+        Ok(out)
+    }
+
+    /// Restores a state saved by [`Self::state`]; errors name a missing or mis-shaped tensor.
+    pub fn load_state(&mut self, state: &HashMap<String, Tensor>) -> Result<(), String> {
+        for (i, (name, var)) in self.vars.iter().enumerate() {
+            for (kind, slot) in [("m", &mut self.first[i]), ("v", &mut self.second[i])] {
+                let key = format!("adam.{kind}.{name}");
+                let t = state
+                    .get(&key)
+                    .ok_or_else(|| format!("optimiser state lacks `{key}`"))?;
+                if t.dims() != var.dims() {
+                    return Err(format!(
+                        "`{key}` has shape {:?}, the parameter {:?}",
+                        t.dims(),
+                        var.dims()
+                    ));
+                }
+                *slot = t.to_dtype(DType::F32).map_err(|e| e.to_string())?;
+            }
+        }
+        let step = state
+            .get("adam.step")
+            .ok_or("optimiser state lacks `adam.step`")?
+            .to_vec1::<f64>()
+            .map_err(|e| e.to_string())?;
+        self.step = step.first().copied().unwrap_or(0.0) as u64;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn adam_fits_a_linear_function_and_its_state_round_trips() {
+        let dev = Device::Cpu;
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
+        let net = Mlp::new(&vb, 2, &[16], 1, Activation::Tanh, 1.0).unwrap();
+        let mut adam = Adam::new(&varmap, 1e-2).unwrap();
+        let x = Tensor::new(&[[0.1f32, 0.2], [0.5, -0.3], [-0.4, 0.8], [0.9, 0.1]], &dev).unwrap();
+        let y = Tensor::new(&[[0.5f32], [-0.1], [1.2], [1.1]], &dev).unwrap(); // y = x0 + 2 x1 + 0.0.
+        let loss = |net: &Mlp| {
+            (net.forward(&x).unwrap() - &y)
+                .unwrap()
+                .sqr()
+                .unwrap()
+                .mean_all()
+                .unwrap()
+        };
+        let first = loss(&net).to_scalar::<f32>().unwrap();
+        for _ in 0..300 {
+            adam.backward_step(&loss(&net), 10.0).unwrap();
+        }
+        let last = loss(&net).to_scalar::<f32>().unwrap();
+        assert!(last < first * 0.05, "loss {first} -> {last}");
+        let state = adam.state().unwrap();
+        let mut other = Adam::new(&varmap, 1e-2).unwrap();
+        other.load_state(&state).unwrap();
+        assert_eq!(other.step, 300);
+        let mut broken = state.clone();
+        broken.remove("adam.step");
+        assert!(other.load_state(&broken).unwrap_err().contains("adam.step"));
+    }
+}

@@ -1,0 +1,524 @@
+//! Proximal Policy Optimization (Schulman et al. 2017), clipped objective, read top to bottom
+//! like CleanRL's `ppo_continuous_action.py`.
+//!
+//! Per iteration: collect `n_steps` steps from every environment; compute GAE(λ) advantages;
+//! for `n_epochs`, shuffle and split into minibatches of `batch_size`; minimise
+//! `−min(r·A, clip(r, 1±ε)·A) + c_v·(V − R)² − c_e·H` with the global gradient norm clipped;
+//! stop the epochs early when the approximate KL exceeds `target_kl`.
+
+use crate::buffers::RolloutBuffer;
+use crate::nn::{Activation, Adam, Mlp};
+use candle_core::{D, DType, Device, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use fairgrasp_env::{EnvError, VectorEnv};
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// How the learning rate changes over training.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LrSchedule {
+    Constant,
+    /// Linearly from `learning_rate` to 0 at `total_timesteps`.
+    Linear,
+}
+
+/// PPO hyperparameters. The defaults are the design's settings (SB3's PPO with the values of the
+/// design document), kept as the `seed` preset.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    pub learning_rate: f64,
+    pub lr_schedule: LrSchedule,
+    /// Steps per environment per rollout.
+    pub n_steps: usize,
+    /// Minibatch size.
+    pub batch_size: usize,
+    pub n_epochs: usize,
+    pub gamma: f32,
+    pub gae_lambda: f32,
+    pub clip_range: f32,
+    /// Clip the value update around the old values (None: no clipping, SB3's default).
+    pub clip_range_vf: Option<f32>,
+    pub normalize_advantage: bool,
+    pub ent_coef: f32,
+    pub vf_coef: f32,
+    pub max_grad_norm: f64,
+    /// Stop an update's epochs early when the approximate KL divergence exceeds this.
+    pub target_kl: Option<f32>,
+    /// Hidden layers of the policy and of the value network.
+    pub net_arch: Vec<usize>,
+    pub activation: Activation,
+    /// Initial log standard deviation of the Gaussian policy.
+    pub log_std_init: f32,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        Self {
+            learning_rate: 3e-4,
+            lr_schedule: LrSchedule::Constant,
+            n_steps: 2048,
+            batch_size: 256,
+            n_epochs: 10,
+            gamma: 0.99,
+            gae_lambda: 0.95,
+            clip_range: 0.2,
+            clip_range_vf: None,
+            normalize_advantage: true,
+            ent_coef: 0.01,
+            vf_coef: 0.5,
+            max_grad_norm: 0.5,
+            target_kl: None,
+            net_arch: vec![64, 64],
+            activation: Activation::Tanh,
+            log_std_init: 0.0,
+        }
+    }
+}
+
+/// Errors of the learning code.
+#[derive(Debug, thiserror::Error)]
+pub enum RlError {
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error("network: {0}")]
+    Candle(#[from] candle_core::Error),
+    #[error("invalid setting `{key}`: {problem}")]
+    Config { key: String, problem: String },
+    #[error("{0}")]
+    Other(String),
+}
+
+pub type Result<T, E = RlError> = std::result::Result<T, E>;
+
+const HALF_LN_2PI: f32 = 0.918_938_5;
+
+/// A Gaussian policy with a state-independent standard deviation, and a separate value network.
+pub struct ActorCritic {
+    pub varmap: VarMap,
+    policy: Mlp,
+    value: Mlp,
+    log_std: Var,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    device: Device,
+}
+
+/// What the policy decided for a batch of observations.
+#[derive(Clone, Debug, Default)]
+pub struct PolicyOutput {
+    /// Sampled (or, deterministically, mean) actions, unclipped.
+    pub actions: Vec<f32>,
+    pub log_probs: Vec<f32>,
+    pub values: Vec<f32>,
+}
+
+impl ActorCritic {
+    pub fn new(obs_dim: usize, act_dim: usize, config: &PpoConfig) -> Result<Self> {
+        let device = Device::Cpu;
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &device);
+        let policy = Mlp::new(
+            &vb.pp("pi"),
+            obs_dim,
+            &config.net_arch,
+            act_dim,
+            config.activation,
+            0.01,
+        )?;
+        let value = Mlp::new(
+            &vb.pp("vf"),
+            obs_dim,
+            &config.net_arch,
+            1,
+            config.activation,
+            1.0,
+        )?;
+        vb.get_with_hints(
+            act_dim,
+            "log_std",
+            candle_nn::Init::Const(config.log_std_init as f64),
+        )?;
+        let log_std = varmap
+            .data()
+            .lock()
+            .expect("varmap lock")
+            .get("log_std")
+            .cloned()
+            .ok_or_else(|| RlError::Other("log_std parameter missing".into()))?;
+        Ok(Self {
+            varmap,
+            policy,
+            value,
+            log_std,
+            obs_dim,
+            act_dim,
+            device,
+        })
+    }
+
+    fn obs_tensor(&self, obs: &[f32]) -> Result<Tensor> {
+        Ok(Tensor::from_slice(
+            obs,
+            (obs.len() / self.obs_dim, self.obs_dim),
+            &self.device,
+        )?)
+    }
+
+    /// Means of the action distribution for a batch of observations.
+    pub fn mean_actions(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        Ok(self
+            .policy
+            .forward(&self.obs_tensor(obs)?)?
+            .flatten_all()?
+            .to_vec1()?)
+    }
+
+    /// State values for a batch of observations.
+    pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        Ok(self
+            .value
+            .forward(&self.obs_tensor(obs)?)?
+            .flatten_all()?
+            .to_vec1()?)
+    }
+
+    /// Samples actions (or takes the means when `deterministic`), with log-probabilities and
+    /// values. The noise comes from `rng`, so a seeded run is reproducible.
+    pub fn act(
+        &self,
+        obs: &[f32],
+        deterministic: bool,
+        rng: &mut impl Rng,
+    ) -> Result<PolicyOutput> {
+        let means = self.mean_actions(obs)?;
+        let values = self.values(obs)?;
+        let log_std: Vec<f32> = self.log_std.as_tensor().to_vec1()?;
+        let n = means.len() / self.act_dim;
+        let mut actions = Vec::with_capacity(means.len());
+        let mut log_probs = Vec::with_capacity(n);
+        for row in means.chunks(self.act_dim) {
+            let mut lp = 0.0;
+            for (k, mean) in row.iter().enumerate() {
+                let z = if deterministic {
+                    0.0
+                } else {
+                    standard_normal(rng)
+                };
+                actions.push(mean + log_std[k].exp() * z);
+                lp += -0.5 * z * z - log_std[k] - HALF_LN_2PI;
+            }
+            log_probs.push(lp);
+        }
+        Ok(PolicyOutput {
+            actions,
+            log_probs,
+            values,
+        })
+    }
+}
+
+/// A draw from N(0, 1) (Box–Muller).
+pub fn standard_normal(rng: &mut impl Rng) -> f32 {
+    let u1: f32 = rng.random::<f32>().max(1e-12);
+    let u2: f32 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
+}
+
+/// Statistics of one PPO update (SB3's `train/*` scalars).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct UpdateStats {
+    pub policy_loss: f32,
+    pub value_loss: f32,
+    pub entropy: f32,
+    pub approx_kl: f32,
+    pub clip_fraction: f32,
+    pub explained_variance: f32,
+    pub grad_norm: f32,
+    pub learning_rate: f64,
+    pub std: f32,
+    pub epochs_run: usize,
+}
+
+/// The PPO learner: policy, optimiser, rollout buffer and random stream.
+pub struct Ppo {
+    pub config: PpoConfig,
+    pub policy: ActorCritic,
+    pub optimizer: Adam,
+    pub buffer: RolloutBuffer,
+    pub rng: ChaCha8Rng,
+    /// Environment steps taken so far (all environments together).
+    pub num_timesteps: u64,
+}
+
+impl Ppo {
+    pub fn new(
+        config: PpoConfig,
+        obs_dim: usize,
+        act_dim: usize,
+        n_envs: usize,
+        seed: u64,
+    ) -> Result<Self> {
+        validate(&config, n_envs)?;
+        let policy = ActorCritic::new(obs_dim, act_dim, &config)?;
+        let optimizer = Adam::new(&policy.varmap, config.learning_rate)?;
+        Ok(Self {
+            buffer: RolloutBuffer::new(config.n_steps, n_envs, obs_dim, act_dim),
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            config,
+            policy,
+            optimizer,
+            num_timesteps: 0,
+        })
+    }
+
+    /// Fills the rollout buffer from `venv`, starting from its current observations.
+    /// `on_step` sees every vector step (for episode statistics). Returns whether the last
+    /// observations start new episodes.
+    pub fn collect_rollout<V: VectorEnv>(
+        &mut self,
+        venv: &mut V,
+        episode_starts: &mut Vec<bool>,
+        mut on_step: impl FnMut(&fairgrasp_env::VecStep<'_>),
+    ) -> Result<()> {
+        let space = venv.action_space().clone();
+        let n = venv.num_envs();
+        self.buffer.clear();
+        let mut obs = venv.observations().to_vec();
+        let mut clipped = vec![0.0; n * space.dim()];
+        while !self.buffer.is_full() {
+            let out = self.policy.act(&obs, false, &mut self.rng)?;
+            clipped.copy_from_slice(&out.actions);
+            for row in clipped.chunks_mut(space.dim()) {
+                space.clip(row);
+            }
+            let step = venv.step(&clipped)?;
+            on_step(&step);
+            let mut rewards = step.rewards.to_vec();
+            // Bootstrap truncated episodes from their real final observation.
+            for (i, end) in step.episode_ends.iter().enumerate() {
+                if let (Some(end), true) = (end, step.truncated[i]) {
+                    let v = self.policy.values(&end.terminal_observation)?[0];
+                    rewards[i] += self.config.gamma * v;
+                }
+            }
+            self.buffer.push(
+                &obs,
+                &out.actions,
+                &rewards,
+                episode_starts,
+                &out.values,
+                &out.log_probs,
+            );
+            obs.copy_from_slice(step.observations);
+            for i in 0..n {
+                episode_starts[i] = step.terminated[i] || step.truncated[i];
+            }
+            self.num_timesteps += n as u64;
+        }
+        let last_values = self.policy.values(&obs)?;
+        self.buffer.compute_returns_and_advantages(
+            &last_values,
+            episode_starts,
+            self.config.gamma,
+            self.config.gae_lambda,
+        );
+        Ok(())
+    }
+
+    /// One PPO update on the collected rollout. `progress_remaining` goes from 1 to 0 over
+    /// training (for the learning-rate schedule).
+    pub fn update(&mut self, progress_remaining: f64) -> Result<UpdateStats> {
+        let c = self.config.clone();
+        let lr = match c.lr_schedule {
+            LrSchedule::Constant => c.learning_rate,
+            LrSchedule::Linear => c.learning_rate * progress_remaining.max(0.0),
+        };
+        self.optimizer.lr = lr;
+        let b = &self.buffer;
+        let total = b.len();
+        let dev = Device::Cpu;
+        let obs_all = Tensor::from_slice(
+            &b.observations[..total * b.obs_dim],
+            (total, b.obs_dim),
+            &dev,
+        )?;
+        let act_all =
+            Tensor::from_slice(&b.actions[..total * b.act_dim], (total, b.act_dim), &dev)?;
+        let logp_all = Tensor::from_slice(&b.log_probs[..total], total, &dev)?;
+        let adv_all = Tensor::from_slice(&b.advantages[..total], total, &dev)?;
+        let ret_all = Tensor::from_slice(&b.returns[..total], total, &dev)?;
+        let val_all = Tensor::from_slice(&b.values[..total], total, &dev)?;
+        let explained_variance = explained_variance(&b.values[..total], &b.returns[..total]);
+
+        let mut indices: Vec<u32> = (0..total as u32).collect();
+        let mut stats = UpdateStats {
+            learning_rate: lr,
+            explained_variance,
+            ..UpdateStats::default()
+        };
+        let (mut pg_sum, mut v_sum, mut ent_sum, mut kl_sum, mut clip_sum, mut gn_sum, mut count) =
+            (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
+        'epochs: for epoch in 0..c.n_epochs {
+            indices.shuffle(&mut self.rng);
+            for batch in indices.chunks(c.batch_size) {
+                let idx = Tensor::from_slice(batch, batch.len(), &dev)?;
+                let obs = obs_all.index_select(&idx, 0)?;
+                let actions = act_all.index_select(&idx, 0)?;
+                let old_logp = logp_all.index_select(&idx, 0)?;
+                let mut adv = adv_all.index_select(&idx, 0)?;
+                if c.normalize_advantage && batch.len() > 1 {
+                    let mean = adv.mean_all()?;
+                    let std = adv.broadcast_sub(&mean)?.sqr()?.mean_all()?.sqrt()?;
+                    adv = adv.broadcast_sub(&mean)?.broadcast_div(&(std + 1e-8)?)?;
+                }
+                let returns = ret_all.index_select(&idx, 0)?;
+
+                // log π(a|s) of the current policy.
+                let mean = self.policy.policy.forward(&obs)?;
+                let log_std = self.policy.log_std.as_tensor();
+                let z = actions.sub(&mean)?.broadcast_mul(&log_std.neg()?.exp()?)?;
+                let logp = ((z.sqr()? * -0.5)?.broadcast_sub(log_std)? - HALF_LN_2PI as f64)?
+                    .sum(D::Minus1)?;
+                let log_ratio = (&logp - &old_logp)?;
+                let ratio = log_ratio.exp()?;
+
+                // Clipped surrogate objective.
+                let surrogate1 = (&ratio * &adv)?;
+                let surrogate2 = (ratio.clamp(1.0 - c.clip_range, 1.0 + c.clip_range)? * &adv)?;
+                let policy_loss = surrogate1.minimum(&surrogate2)?.mean_all()?.neg()?;
+
+                // Value loss, optionally clipped around the old values.
+                let values = self.policy.value.forward(&obs)?.squeeze(1)?;
+                let value_loss = match c.clip_range_vf {
+                    None => (&values - &returns)?.sqr()?.mean_all()?,
+                    Some(eps) => {
+                        let old = val_all.index_select(&idx, 0)?;
+                        let clipped = (&old + (&values - &old)?.clamp(-eps, eps)?)?;
+                        let a = (&values - &returns)?.sqr()?;
+                        let b = (&clipped - &returns)?.sqr()?;
+                        a.maximum(&b)?.mean_all()?
+                    }
+                };
+                // Entropy of a diagonal Gaussian: Σ (log σ + ½ ln 2πe).
+                let entropy = (log_std.sum_all()?
+                    + (self.policy.act_dim as f32 * (0.5 + HALF_LN_2PI)) as f64)?;
+                let loss = ((&policy_loss + (&value_loss * c.vf_coef as f64)?)?
+                    - (&entropy * c.ent_coef as f64)?)?;
+
+                // Diagnostics before the step (what SB3 logs).
+                let approx_kl = ((&ratio - 1.0)? - &log_ratio)?
+                    .mean_all()?
+                    .to_scalar::<f32>()?;
+                let clip_fraction = (&ratio - 1.0)?
+                    .abs()?
+                    .gt(c.clip_range as f64)?
+                    .to_dtype(DType::F32)?
+                    .mean_all()?
+                    .to_scalar::<f32>()?;
+                if let Some(target) = c.target_kl
+                    && approx_kl > 1.5 * target
+                {
+                    stats.epochs_run = epoch;
+                    break 'epochs;
+                }
+                let grad_norm = self.optimizer.backward_step(&loss, c.max_grad_norm)?;
+
+                pg_sum += policy_loss.to_scalar::<f32>()?;
+                v_sum += value_loss.to_scalar::<f32>()?;
+                ent_sum += entropy.to_scalar::<f32>()?;
+                kl_sum += approx_kl;
+                clip_sum += clip_fraction;
+                gn_sum += grad_norm as f32;
+                count += 1;
+            }
+            stats.epochs_run = epoch + 1;
+        }
+        let n = count.max(1) as f32;
+        stats.policy_loss = pg_sum / n;
+        stats.value_loss = v_sum / n;
+        stats.entropy = ent_sum / n;
+        stats.approx_kl = kl_sum / n;
+        stats.clip_fraction = clip_sum / n;
+        stats.grad_norm = gn_sum / n;
+        stats.std = self
+            .policy
+            .log_std
+            .as_tensor()
+            .exp()?
+            .mean_all()?
+            .to_scalar::<f32>()?;
+        Ok(stats)
+    }
+}
+
+/// `1 − Var(returns − values) / Var(returns)`: how much of the return the value function explains.
+pub fn explained_variance(values: &[f32], returns: &[f32]) -> f32 {
+    let n = returns.len().max(1) as f32;
+    let mean_r = returns.iter().sum::<f32>() / n;
+    let var_r = returns.iter().map(|r| (r - mean_r).powi(2)).sum::<f32>() / n;
+    if var_r == 0.0 {
+        return f32::NAN;
+    }
+    let diff: Vec<f32> = returns.iter().zip(values).map(|(r, v)| r - v).collect();
+    let mean_d = diff.iter().sum::<f32>() / n;
+    let var_d = diff.iter().map(|d| (d - mean_d).powi(2)).sum::<f32>() / n;
+    1.0 - var_d / var_r
+}
+
+fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
+    let bad = |key: &str, problem: String| {
+        Err(RlError::Config {
+            key: format!("ppo.{key}"),
+            problem,
+        })
+    };
+    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
+        return bad(
+            "learning_rate",
+            format!("must be positive, got {}", c.learning_rate),
+        );
+    }
+    if c.n_steps == 0 {
+        return bad("n_steps", "must be at least 1".into());
+    }
+    if c.batch_size == 0 || c.batch_size > c.n_steps * n_envs {
+        return bad(
+            "batch_size",
+            format!(
+                "must be in 1..={} (n_steps × n_envs), got {}",
+                c.n_steps * n_envs,
+                c.batch_size
+            ),
+        );
+    }
+    if c.n_epochs == 0 {
+        return bad("n_epochs", "must be at least 1".into());
+    }
+    for (key, v) in [("gamma", c.gamma), ("gae_lambda", c.gae_lambda)] {
+        if !(0.0..=1.0).contains(&v) {
+            return bad(key, format!("must be in [0, 1], got {v}"));
+        }
+    }
+    if !(c.clip_range > 0.0 && c.clip_range < 1.0) {
+        return bad(
+            "clip_range",
+            format!("must be in (0, 1), got {}", c.clip_range),
+        );
+    }
+    if c.net_arch.is_empty() || c.net_arch.contains(&0) {
+        return bad(
+            "net_arch",
+            "needs at least one hidden layer, all of positive width".into(),
+        );
+    }
+    for (key, v) in [("ent_coef", c.ent_coef), ("vf_coef", c.vf_coef)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(key, format!("must be non-negative, got {v}"));
+        }
+    }
+    Ok(())
+}
