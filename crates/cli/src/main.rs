@@ -5,6 +5,7 @@ mod bench;
 mod demo;
 mod env_cmd;
 mod inspect;
+mod train_cmd;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -29,6 +30,8 @@ enum Command {
     /// Run a demonstration in simulation.
     #[command(subcommand)]
     Demo(demo::DemoCommand),
+    /// Train a grasp policy (PPO) with evaluation, checkpoints and TensorBoard logs.
+    Train(train_cmd::TrainArgs),
     /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
     #[command(subcommand)]
     Env(env_cmd::EnvCommand),
@@ -115,6 +118,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Inspect(args) => inspect::run(&args),
         Command::Demo(command) => demo::run(command),
+        Command::Train(args) => train_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
     };

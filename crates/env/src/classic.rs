@@ -235,8 +235,8 @@ impl Env for PointReach {
             return Err(EnvError::Usage("call reset() before step()".into()));
         }
         check_action(action, 2)?;
-        for k in 0..2 {
-            let force = action[k].clamp(-1.0, 1.0);
+        for (k, force) in action.iter().enumerate() {
+            let force = force.clamp(-1.0, 1.0);
             // Damped double integrator.
             self.vel[k] =
                 (self.vel[k] + (2.0 * force - 0.5 * self.vel[k]) * Self::DT).clamp(-2.0, 2.0);

@@ -13,5 +13,6 @@ pub mod logger;
 pub mod nn;
 pub mod ppo;
 pub mod save_util;
+pub mod train;
 
 pub use fairgrasp_env as env;

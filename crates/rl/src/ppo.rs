@@ -281,7 +281,7 @@ impl Ppo {
     pub fn collect_rollout<V: VectorEnv>(
         &mut self,
         venv: &mut V,
-        episode_starts: &mut Vec<bool>,
+        episode_starts: &mut [bool],
         mut on_step: impl FnMut(&fairgrasp_env::VecStep<'_>),
     ) -> Result<()> {
         let space = venv.action_space().clone();
@@ -314,8 +314,8 @@ impl Ppo {
                 &out.log_probs,
             );
             obs.copy_from_slice(step.observations);
-            for i in 0..n {
-                episode_starts[i] = step.terminated[i] || step.truncated[i];
+            for (i, start) in episode_starts.iter_mut().enumerate() {
+                *start = step.terminated[i] || step.truncated[i];
             }
             self.num_timesteps += n as u64;
         }
