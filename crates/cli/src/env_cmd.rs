@@ -32,7 +32,8 @@ impl EnvArgs {
 #[derive(clap::Subcommand)]
 pub enum EnvCommand {
     /// Verify the Gymnasium contract, determinism and a NaN-free random rollout, for every
-    /// observation preset, action mode and reward type, with and without randomisation.
+    /// observation preset, action mode and reward type, with and without randomisation
+    /// (24 variants).
     Check(CheckArgs),
     /// Random actions: throughput and episode statistics.
     Random(RandomArgs),
@@ -123,7 +124,7 @@ fn check(args: &CheckArgs) -> Result<()> {
         for randomize in [false, true] {
             for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
                 for mode in [ActionMode::Joint, ActionMode::Cartesian] {
-                    for reward in [RewardKind::Sparse, RewardKind::Hybrid] {
+                    for reward in [RewardKind::Sparse, RewardKind::Hybrid, RewardKind::Staged] {
                         let mut c = base.clone();
                         c.task.observation = obs;
                         c.task.action_mode = mode;

@@ -296,6 +296,28 @@ impl GraspEnv {
                     terms.success = r.success;
                 }
             }
+            RewardKind::Staged => {
+                let third = 1.0 / 3.0;
+                terms.reach = third * (1.0 - (10.0 * distance).tanh());
+                if status.closed_on_object {
+                    terms.grasp = third;
+                    let shortfall =
+                        (self.config.task.success_min_lift + 0.01 - status.lift as f32).max(0.0);
+                    terms.lift = third * (1.0 - (20.0 * shortfall).tanh());
+                }
+                terms.time = -1.0;
+                if off_table {
+                    let remaining = self
+                        .config
+                        .task
+                        .max_episode_steps
+                        .saturating_sub(episode.steps) as f32;
+                    terms.off_table = -remaining;
+                }
+                if success {
+                    terms.success = r.success;
+                }
+            }
             RewardKind::Hybrid => {
                 terms.approach = r.approach * (episode.previous_distance - distance);
                 if distance < r.near_radius {
@@ -504,7 +526,7 @@ pub fn all_variants() -> Vec<(ObservationPreset, ActionMode, RewardKind)> {
     let mut out = Vec::new();
     for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
         for mode in [ActionMode::Joint, ActionMode::Cartesian] {
-            for reward in [RewardKind::Sparse, RewardKind::Hybrid] {
+            for reward in [RewardKind::Sparse, RewardKind::Hybrid, RewardKind::Staged] {
                 out.push((obs, mode, reward));
             }
         }

@@ -324,3 +324,42 @@ fn the_documented_env_config_is_the_default() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/env.toml");
     assert_eq!(EnvConfig::load(&path, &[]).unwrap(), EnvConfig::default());
 }
+
+#[test]
+fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages() {
+    let mut env = env_with(|c| c.reward.kind = RewardKind::Staged);
+    env.reset(Some(9)).unwrap();
+    let mut policy = ScriptedGraspPolicy::new(&env);
+    let mut first = None;
+    let mut best_before_success = f32::MIN;
+    loop {
+        let step = env.step(&policy.act(&env)).unwrap();
+        let t = step.info.reward_terms;
+        assert!((t.total() - step.reward).abs() < 1e-6);
+        first.get_or_insert(step.reward);
+        if step.terminated || step.truncated {
+            assert!(step.info.success);
+            assert_eq!(t.success, 10.0);
+            break;
+        }
+        assert!(step.reward <= 0.0 && step.reward >= -1.0, "{}", step.reward);
+        if step.info.grasped {
+            assert!(t.grasp > 0.0);
+        }
+        best_before_success = best_before_success.max(step.reward);
+    }
+    // Far from the cube at first; grasped and lifted near the end (close to 0).
+    assert!(first.unwrap() < -0.6, "first {first:?}");
+    assert!(best_before_success > -0.05, "best {best_before_success}");
+
+    // Knocking the cube off the table costs the worst reward for every remaining step.
+    let mut env = env_with(|c| {
+        c.reward.kind = RewardKind::Staged;
+        c.scene.table.size = [0.3, 0.3];
+        c.scene.table.center = [0.0, 0.0];
+    });
+    env.reset(Some(2)).unwrap();
+    let step = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
+    assert!(step.terminated);
+    assert_eq!(step.info.reward_terms.off_table, -99.0);
+}
