@@ -377,7 +377,9 @@ impl EnvConfig {
     }
 }
 
-fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
+/// Sets `section.key=value` in a TOML table (value in TOML syntax; bare words become strings),
+/// creating sections as needed. Shared by every configuration that takes `--set` overrides.
+pub fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
     let (key, value) = item
         .split_once('=')
         .ok_or_else(|| EnvError::config(item, "an override must look like `section.key=value`"))?;

@@ -469,7 +469,7 @@ pub fn explained_variance(values: &[f32], returns: &[f32]) -> f32 {
     1.0 - var_d / var_r
 }
 
-fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
+pub(crate) fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
     let bad = |key: &str, problem: String| {
         Err(RlError::Config {
             key: format!("ppo.{key}"),

@@ -82,28 +82,7 @@ impl TrainConfig {
                 problem: e.to_string(),
             })?;
         for item in overrides {
-            let (key, value) = item.split_once('=').ok_or_else(|| RlError::Config {
-                key: item.clone(),
-                problem: "an override must look like `section.key=value`".into(),
-            })?;
-            let value: toml::Value = format!("v = {}", value.trim())
-                .parse::<toml::Table>()
-                .ok()
-                .and_then(|mut t| t.remove("v"))
-                .unwrap_or_else(|| toml::Value::String(value.trim().to_string()));
-            let parts: Vec<&str> = key.trim().split('.').collect();
-            let mut current = &mut table;
-            for part in &parts[..parts.len() - 1] {
-                current = current
-                    .entry(part.to_string())
-                    .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-                    .as_table_mut()
-                    .ok_or_else(|| RlError::Config {
-                        key: key.to_string(),
-                        problem: format!("`{part}` is a value, not a section"),
-                    })?;
-            }
-            current.insert(parts[parts.len() - 1].to_string(), value);
+            fairgrasp_env::config::apply_override(&mut table, item)?;
         }
         let text = toml::to_string(&table).map_err(|e| RlError::Other(e.to_string()))?;
         let config: TrainConfig = toml::from_str(&text).map_err(|e| RlError::Config {
@@ -127,6 +106,7 @@ impl TrainConfig {
         if self.n_envs == 0 || self.n_envs > 1024 {
             return bad("n_envs", "must be in 1..=1024");
         }
+        crate::ppo::validate(&self.ppo, self.n_envs)?;
         if self.eval.freq > 0 && self.eval.episodes == 0 {
             return bad("eval.episodes", "must be at least 1 when evaluating");
         }
