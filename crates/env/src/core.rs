@@ -50,7 +50,7 @@ pub struct RewardTerms {
     pub off_table: f32,
     /// Sparse reward on success.
     pub success: f32,
-    /// Staged reward: reaching stage, `(1 − tanh(10·d)) / 3`.
+    /// Staged reward: reaching stage, `(1 − tanh(4·d)) / 3`.
     pub reach: f32,
     /// Staged reward: lifting stage while grasped, `(1 − tanh(20·shortfall)) / 3`.
     pub lift: f32,

@@ -298,7 +298,7 @@ impl GraspEnv {
             }
             RewardKind::Staged => {
                 let third = 1.0 / 3.0;
-                terms.reach = third * (1.0 - (10.0 * distance).tanh());
+                terms.reach = third * (1.0 - (4.0 * distance).tanh());
                 if status.closed_on_object {
                     terms.grasp = third;
                     let shortfall =
