@@ -7,7 +7,7 @@ use crate::SceneArgs;
 use anyhow::Result;
 use fairgrasp_env::{Env, EnvConfig, GraspEnv, VecEnv, VectorEnv};
 use fairgrasp_sim::pick::{PickScript, grasp_and_lift};
-use fairgrasp_sim::scene::Scene;
+use fairgrasp_sim::scene::{Scene, Snapshot};
 use rand::SeedableRng;
 use std::time::Instant;
 
@@ -71,6 +71,19 @@ fn rate(seconds: f64, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     Ok(calls as f64 / start.elapsed().as_secs_f64())
 }
 
+/// Physics steps per second from `snapshot`, restoring it every 2,400 steps (10 s simulated at
+/// 240 Hz) so the measured state stays the same.
+fn steps_rate(scene: &mut Scene, snapshot: &Snapshot, seconds: f64) -> Result<f64> {
+    let mut n = 0u64;
+    rate(seconds, || {
+        n += 1;
+        if n.is_multiple_of(2400) {
+            scene.restore(snapshot);
+        }
+        scene.step_physics().map_err(Into::into)
+    })
+}
+
 fn physics(args: &PhysicsBenchArgs) -> Result<()> {
     anyhow::ensure!(args.seconds > 0.0, "--seconds must be positive");
     let mut scene = Scene::new(args.scene.scene_config()?)?;
@@ -78,14 +91,7 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
     // Arm holding its home pose, cube resting on the table.
     scene.reset(0)?;
     let idle = scene.snapshot();
-    let mut n = 0u64;
-    let idle_rate = rate(args.seconds, || {
-        n += 1;
-        if n.is_multiple_of(2400) {
-            scene.restore(&idle);
-        }
-        scene.step_physics().map_err(Into::into)
-    })?;
+    let idle_rate = steps_rate(&mut scene, &idle, args.seconds)?;
 
     // Cube squeezed between the pads and lifted: the contact-heavy state of the task.
     scene.reset(0)?;
@@ -93,14 +99,7 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
         s.step_control()
     })?;
     let held = scene.snapshot();
-    let mut n = 0u64;
-    let grasp_rate = rate(args.seconds, || {
-        n += 1;
-        if n.is_multiple_of(2400) {
-            scene.restore(&held);
-        }
-        scene.step_physics().map_err(Into::into)
-    })?;
+    let grasp_rate = steps_rate(&mut scene, &held, args.seconds)?;
 
     // Reset to a new random placement (validity check with IK, settling included).
     let mut seed = 0u64;
