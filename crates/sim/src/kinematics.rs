@@ -6,7 +6,7 @@
 
 use crate::error::{Result, SimError};
 use crate::model::{JointKind, Origin, RobotModel};
-use rapier3d::na::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+use rapier3d::na::{Isometry3, Matrix6, Matrix6xX, Translation3, UnitQuaternion, Vector3, Vector6};
 
 /// An origin as an isometry: translation then fixed-axis roll-pitch-yaw (URDF convention).
 pub fn origin_to_isometry(o: &Origin) -> Isometry3<f64> {
@@ -79,6 +79,19 @@ impl SerialChain {
         })
     }
 
+    fn joint_motion(joint: &ChainJoint, value: f64) -> Isometry3<f64> {
+        match joint.kind {
+            JointKind::Prismatic => Isometry3::from_parts(
+                Translation3::from(joint.axis * value),
+                UnitQuaternion::identity(),
+            ),
+            _ => Isometry3::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_scaled_axis(joint.axis * value),
+            ),
+        }
+    }
+
     /// Number of movable joints.
     pub fn dof(&self) -> usize {
         self.joint_names.len()
@@ -90,43 +103,38 @@ impl SerialChain {
         for joint in &self.joints {
             pose *= joint.origin;
             if let Some(i) = joint.dof {
-                let motion = match joint.kind {
-                    JointKind::Prismatic => Isometry3::from_parts(
-                        Translation3::from(joint.axis * q[i]),
-                        UnitQuaternion::identity(),
-                    ),
-                    _ => Isometry3::from_parts(
-                        Translation3::identity(),
-                        UnitQuaternion::from_scaled_axis(joint.axis * q[i]),
-                    ),
-                };
-                pose *= motion;
+                pose *= Self::joint_motion(joint, q[i]);
             }
         }
         pose * self.tool
     }
 
-    /// Geometric Jacobian (linear; angular rows, world frame) of the tool frame, by central
-    /// differences: exact enough for IK and cheap for six joints.
-    fn jacobian(&self, q: &[f64]) -> rapier3d::na::DMatrix<f64> {
+    /// Geometric Jacobian (linear; angular rows, root frame) of the tool frame, from one pass
+    /// along the chain: a revolute joint contributes `axis × (tool − joint)` and `axis`, a
+    /// prismatic one `axis` and zero.
+    fn jacobian(&self, q: &[f64]) -> (Isometry3<f64>, Matrix6xX<f64>) {
         let n = self.dof();
-        let mut jac = rapier3d::na::DMatrix::zeros(6, n);
-        let h = 1e-6;
-        let mut qp = q.to_vec();
-        for i in 0..n {
-            qp[i] = q[i] + h;
-            let plus = self.forward(&qp);
-            qp[i] = q[i] - h;
-            let minus = self.forward(&qp);
-            qp[i] = q[i];
-            let dp = (plus.translation.vector - minus.translation.vector) / (2.0 * h);
-            let dr = (plus.rotation * minus.rotation.inverse()).scaled_axis() / (2.0 * h);
-            for r in 0..3 {
-                jac[(r, i)] = dp[r];
-                jac[(r + 3, i)] = dr[r];
+        let mut columns = Vec::with_capacity(n);
+        let mut pose = Isometry3::identity();
+        for joint in &self.joints {
+            pose *= joint.origin;
+            if let Some(i) = joint.dof {
+                let axis = pose.rotation * joint.axis;
+                columns.push((joint.kind, axis, pose.translation.vector));
+                pose *= Self::joint_motion(joint, q[i]);
             }
         }
-        jac
+        let tool = pose * self.tool;
+        let mut jac = Matrix6xX::zeros(n);
+        for (i, (kind, axis, origin)) in columns.into_iter().enumerate() {
+            let (linear, angular) = match kind {
+                JointKind::Prismatic => (axis, Vector3::zeros()),
+                _ => (axis.cross(&(tool.translation.vector - origin)), axis),
+            };
+            jac.fixed_view_mut::<3, 1>(0, i).copy_from(&linear);
+            jac.fixed_view_mut::<3, 1>(3, i).copy_from(&angular);
+        }
+        (tool, jac)
     }
 
     /// Damped-least-squares IK from `seed`, staying within joint limits.
@@ -181,19 +189,15 @@ impl SerialChain {
             .collect();
         let mut error = f64::INFINITY;
         for _ in 0..200 {
-            let pose = self.forward(&q);
+            let (pose, jac) = self.jacobian(&q);
             let e = pose_error(&pose, target);
             error = e.norm();
             if e.fixed_rows::<3>(0).norm() < tolerance && e.fixed_rows::<3>(3).norm() < tolerance {
                 return Ok(q);
             }
-            let jac = self.jacobian(&q);
             // dq = Jᵀ (J Jᵀ + λ² I)⁻¹ e, with damping growing near singularities.
             let lambda2 = 1e-4 + 1e-2 * error.min(1.0);
-            let jjt: Matrix6<f64> = (&jac * jac.transpose())
-                .fixed_view::<6, 6>(0, 0)
-                .into_owned()
-                + Matrix6::identity() * lambda2;
+            let jjt: Matrix6<f64> = &jac * jac.transpose() + Matrix6::identity() * lambda2;
             let Some(inv) = jjt.try_inverse() else {
                 break;
             };
@@ -217,4 +221,40 @@ pub fn pose_error(current: &Isometry3<f64>, target: &Isometry3<f64>) -> Vector6<
     let dp = target.translation.vector - current.translation.vector;
     let dr = (target.rotation * current.rotation.inverse()).scaled_axis();
     Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The analytic Jacobian against central differences of `forward`, with a tool offset.
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let model = crate::assets::fr5().unwrap();
+        let mut chain = SerialChain::new(&model, "tool0").unwrap();
+        chain.tool = Isometry3::from_parts(
+            Translation3::new(0.01, -0.02, 0.1),
+            UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3),
+        );
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..20 {
+            let q: Vec<f64> = (0..6).map(|_| rng.random_range(-2.0..2.0)).collect();
+            let (pose, jac) = chain.jacobian(&q);
+            assert!((pose.translation.vector - chain.forward(&q).translation.vector).norm() < 1e-12);
+            let h = 1e-6;
+            for i in 0..6 {
+                let (mut plus, mut minus) = (q.clone(), q.clone());
+                plus[i] += h;
+                minus[i] -= h;
+                let (p, m) = (chain.forward(&plus), chain.forward(&minus));
+                let dp = (p.translation.vector - m.translation.vector) / (2.0 * h);
+                let dr = (p.rotation * m.rotation.inverse()).scaled_axis() / (2.0 * h);
+                for r in 0..3 {
+                    assert!((jac[(r, i)] - dp[r]).abs() < 1e-6, "linear {r},{i}");
+                    assert!((jac[(r + 3, i)] - dr[r]).abs() < 1e-6, "angular {r},{i}");
+                }
+            }
+        }
+    }
 }
