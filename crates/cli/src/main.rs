@@ -4,6 +4,7 @@
 mod bench;
 mod demo;
 mod env_cmd;
+mod eval_cmd;
 mod inspect;
 mod train_cmd;
 
@@ -30,8 +31,10 @@ enum Command {
     /// Run a demonstration in simulation.
     #[command(subcommand)]
     Demo(demo::DemoCommand),
-    /// Train a grasp policy (PPO) with evaluation, checkpoints and TensorBoard logs.
+    /// Train a grasp policy (PPO or SAC) with evaluation, checkpoints, resume and TensorBoard logs.
     Train(train_cmd::TrainArgs),
+    /// Evaluate a saved model on held-out episodes (success rate, mean return and length).
+    Eval(eval_cmd::EvalArgs),
     /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
     #[command(subcommand)]
     Env(env_cmd::EnvCommand),
@@ -119,6 +122,7 @@ fn main() -> std::process::ExitCode {
         Command::Inspect(args) => inspect::run(&args),
         Command::Demo(command) => demo::run(command),
         Command::Train(args) => train_cmd::run(&args),
+        Command::Eval(args) => eval_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
     };

@@ -1,68 +1,155 @@
-//! `fairgrasp train`: PPO on the grasp task with evaluation, best-model saving, checkpoints,
-//! TensorBoard and CSV logs, and a progress bar.
+//! `fairgrasp train`: PPO or SAC on the grasp task with evaluation, best-model saving,
+//! checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
 
-use anyhow::{Context, Result};
-use fairgrasp_rl::train::{TrainConfig, train_ppo};
+use anyhow::{Context, Result, bail};
+use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume, train};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// The default training configurations (the files in configs/, built in so that `fairgrasp
+/// train` works from any directory).
+pub const PPO_GRASP_TOML: &str = include_str!("../../../configs/ppo_grasp.toml");
+pub const SAC_GRASP_TOML: &str = include_str!("../../../configs/sac_grasp.toml");
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
-    /// Training configuration (TOML): total_timesteps, seed, n_envs, ppo.*, env.*, eval.*.
-    #[arg(long)]
+    /// Training configuration (TOML; every key: configs/ppo_grasp.toml, configs/sac_grasp.toml).
+    /// Without it, the built-in default of the algorithm.
+    #[arg(long, conflicts_with = "resume")]
     pub config: Option<PathBuf>,
-    /// Algorithm (ppo; sac comes with the training issue's second half).
-    #[arg(long, default_value = "ppo")]
-    pub algo: String,
+    /// Algorithm: ppo or sac (overrides the config's `algo`).
+    #[arg(long, value_parser = ["ppo", "sac"], conflicts_with = "resume")]
+    pub algo: Option<String>,
     #[arg(long)]
     pub total_timesteps: Option<u64>,
-    #[arg(long)]
+    #[arg(long, conflicts_with = "resume")]
     pub seed: Option<u64>,
-    /// Where logs, checkpoints and models go.
-    #[arg(long, default_value = "runs/ppo_grasp")]
-    pub run_dir: PathBuf,
+    /// Where logs, checkpoints and models go [default: runs/<algo>_grasp, or the next free
+    /// runs/<algo>_grasp_<n>].
+    #[arg(long, conflicts_with = "resume")]
+    pub run_dir: Option<PathBuf>,
+    /// Continue the run in this directory from its latest checkpoint.
+    #[arg(long, value_name = "RUN_DIR")]
+    pub resume: Option<PathBuf>,
     /// Override a setting: `--set ppo.learning_rate=1e-4 --set env.task.max_episode_steps=80`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
+    /// No progress bar (for logs); one line per evaluation instead.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 pub fn run(args: &TrainArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.algo == "ppo",
-        "--algo {} is not available yet; use ppo",
-        args.algo
-    );
-    let text = match &args.config {
-        Some(path) => std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?,
-        None => String::new(),
-    };
     let mut overrides = args.overrides.clone();
     if let Some(n) = args.total_timesteps {
         overrides.push(format!("total_timesteps={n}"));
     }
+    if let Some(dir) = &args.resume {
+        let text = std::fs::read_to_string(dir.join("config.toml"))
+            .with_context(|| format!("cannot resume {}: no config.toml", dir.display()))?;
+        let config = TrainConfig::from_toml_str(&text, &overrides)
+            .with_context(|| format!("invalid settings for {}", dir.display()))?;
+        let mut reporter = Reporter::new(&config, args.quiet);
+        let summary = resume(dir, &overrides, |p| reporter.update(p))
+            .with_context(|| format!("resuming {}", dir.display()))?;
+        reporter.finish();
+        return print_summary(&summary);
+    }
     if let Some(s) = args.seed {
         overrides.push(format!("seed={s}"));
     }
-    let config = TrainConfig::from_toml_str(&text, &overrides).with_context(|| {
-        args.config
-            .as_ref()
-            .map(|p| format!("invalid config {}", p.display()))
-            .unwrap_or_else(|| "invalid settings".into())
-    })?;
-    let bar = ProgressBar::new(config.total_timesteps);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:30}] {pos}/{len} steps, ETA {eta} {msg}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
+    if let Some(algo) = &args.algo {
+        overrides.push(format!("algo=\"{algo}\""));
+    }
+    let (text, origin) = match &args.config {
+        Some(path) => (
+            std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read {}", path.display()))?,
+            format!("invalid config {}", path.display()),
+        ),
+        None if args.algo.as_deref() == Some("sac") => {
+            (SAC_GRASP_TOML.to_string(), "invalid settings".into())
+        }
+        None => (PPO_GRASP_TOML.to_string(), "invalid settings".into()),
+    };
+    let config = TrainConfig::from_toml_str(&text, &overrides).context(origin)?;
+    let run_dir = match &args.run_dir {
+        Some(dir) => {
+            if holds_a_run(dir) {
+                bail!(
+                    "{} already holds a training run; continue it with --resume {0}, or choose another --run-dir",
+                    dir.display()
+                );
+            }
+            dir.clone()
+        }
+        None => next_free_run_dir(Path::new("runs"), config.algo.as_str()),
+    };
+    println!(
+        "training {} for {} steps ({} envs, seed {}) into {}",
+        config.algo.as_str(),
+        config.total_timesteps,
+        config.n_envs,
+        config.seed,
+        run_dir.display()
     );
-    let summary = train_ppo(&config, &args.run_dir, |p| {
-        bar.set_position(p.num_timesteps.min(p.total_timesteps));
+    let mut reporter = Reporter::new(&config, args.quiet);
+    let summary = train(&config, &run_dir, |p| reporter.update(p))?;
+    reporter.finish();
+    print_summary(&summary)
+}
+
+fn holds_a_run(dir: &Path) -> bool {
+    dir.join("config.toml").exists() || dir.join("checkpoints").exists()
+}
+
+/// `runs/<algo>_grasp`, or `runs/<algo>_grasp_<n>` with the first free n (like SB3's
+/// `PPO_1`, `PPO_2`, … TensorBoard runs).
+fn next_free_run_dir(root: &Path, algo: &str) -> PathBuf {
+    let first = root.join(format!("{algo}_grasp"));
+    if !holds_a_run(&first) {
+        return first;
+    }
+    (2..)
+        .map(|n| root.join(format!("{algo}_grasp_{n}")))
+        .find(|dir| !holds_a_run(dir))
+        .expect("an unused run directory")
+}
+
+/// Progress bar (or, quietly, one line per evaluation).
+struct Reporter {
+    bar: Option<ProgressBar>,
+    evaluations: usize,
+    started: std::time::Instant,
+}
+
+impl Reporter {
+    fn new(config: &TrainConfig, quiet: bool) -> Self {
+        let bar = (!quiet).then(|| {
+            let bar = ProgressBar::new(config.total_timesteps);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:30}] {pos}/{len} steps, ETA {eta} {msg}",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+            );
+            bar
+        });
+        Self {
+            bar,
+            evaluations: 0,
+            started: std::time::Instant::now(),
+        }
+    }
+
+    fn update(&mut self, p: &Progress) {
         let mut msg = format!("{:.0} fps", p.fps);
         if let Some(r) = p.ep_rew_mean {
             msg.push_str(&format!(", ep_rew_mean {r:.2}"));
+        }
+        if let Some(g) = p.rollout_grasp_rate {
+            msg.push_str(&format!(", grasp {:.0}%", g * 100.0));
         }
         if let Some(s) = p.rollout_success_rate {
             msg.push_str(&format!(", success {:.0}%", s * 100.0));
@@ -70,21 +157,45 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         if let Some(e) = &p.last_eval {
             msg.push_str(&format!(", eval success {:.0}%", e.success_rate * 100.0));
         }
-        bar.set_message(msg);
-    })?;
-    bar.finish();
+        match &self.bar {
+            Some(bar) => {
+                bar.set_position(p.num_timesteps.min(p.total_timesteps));
+                bar.set_message(msg);
+            }
+            None => {
+                if self.evaluations < p.eval_count {
+                    self.evaluations = p.eval_count;
+                    let seconds = self.started.elapsed().as_secs();
+                    println!("{seconds:>5} s, {} steps: {msg}", p.num_timesteps);
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish();
+        }
+    }
+}
+
+fn print_summary(summary: &TrainSummary) -> Result<()> {
+    if let Some(step) = summary.resumed_from {
+        println!("resumed from step {step}");
+    }
     println!(
         "trained {} steps in {:.0} s; run directory {}",
         summary.num_timesteps,
         summary.seconds,
         summary.run_dir.display()
     );
-    if let Some(best) = summary.best {
+    if let Some(best) = &summary.best {
         println!(
-            "best evaluation: success {:.0}%, mean return {:.2}, mean length {:.1}",
+            "best evaluation: success {:.0}%, mean return {:.2}, mean length {:.1} (model in {})",
             best.success_rate * 100.0,
             best.mean_return,
-            best.mean_length
+            best.mean_length,
+            summary.run_dir.join("best").display()
         );
     }
     Ok(())

@@ -137,3 +137,88 @@ fn config_errors_name_the_key() {
     let (_, stderr) = text(&fairgrasp(&["demo", "scripted-pick", "--physics-hz=-5"]));
     assert!(stderr.contains("--physics-hz"), "{stderr}");
 }
+
+/// A training configuration small enough for a test: 2 envs, 256 steps per PPO iteration.
+const TINY_TRAIN_TOML: &str = "total_timesteps = 200000\nn_envs = 2\nthreads = 1\n\
+    checkpoint_freq = 512\n[eval]\nfreq = 1024\nepisodes = 1\n\
+    [ppo]\nn_steps = 128\nbatch_size = 128\nn_epochs = 1\n\
+    [env.task]\nmax_episode_steps = 20\n[env.reward]\nkind = \"staged\"\n";
+
+#[test]
+fn training_killed_with_sigkill_resumes_from_its_last_checkpoint_and_evaluates() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, TINY_TRAIN_TOML).unwrap();
+    let run = dir.path().join("run");
+    let (config_arg, run_arg) = (config.to_str().unwrap(), run.to_str().unwrap());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
+        .args([
+            "train",
+            "--config",
+            config_arg,
+            "--run-dir",
+            run_arg,
+            "--quiet",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait for the second checkpoint, then kill -9 in the middle of training.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(300);
+    while !run
+        .join("checkpoints/step_1024/trainer_state.json")
+        .exists()
+    {
+        assert!(child.try_wait().unwrap().is_none(), "training exited early");
+        assert!(std::time::Instant::now() < deadline, "no checkpoint");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    assert!(!run.join("final").exists());
+
+    // Starting a new run over it is refused; resuming continues it to the (new) end.
+    let out = fairgrasp(&["train", "--config", config_arg, "--run-dir", run_arg]);
+    let (_, stderr) = text(&out);
+    assert!(
+        !out.status.success() && stderr.contains("--resume"),
+        "{stderr}"
+    );
+    let out = fairgrasp(&[
+        "train",
+        "--resume",
+        run_arg,
+        "--total-timesteps",
+        "3072",
+        "--quiet",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("resumed from step"), "{stdout}");
+    assert!(stdout.contains("trained 3072 steps"), "{stdout}");
+    assert!(run.join("final/model.json").is_file());
+    assert!(
+        run.join("checkpoints/step_3072/trainer_state.json")
+            .is_file()
+    );
+
+    let out = fairgrasp(&["eval", "--model", run_arg, "--episodes", "3", "--json"]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    for key in [
+        "\"success_rate\"",
+        "\"mean_return\"",
+        "\"mean_length\"",
+        "\"episodes\": 3",
+    ] {
+        assert!(stdout.contains(key), "{key} missing: {stdout}");
+    }
+    // A corrupt model is an error that names the file.
+    std::fs::write(run.join("best/model.safetensors"), b"garbage").unwrap();
+    let out = fairgrasp(&["eval", "--model", run_arg, "--episodes", "1"]);
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success());
+    assert!(stderr.contains("model.safetensors"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

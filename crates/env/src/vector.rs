@@ -260,7 +260,7 @@ impl<E: Env> Slot<E> {
             self.needs_reset = Some("its last step failed");
             return Err(e);
         }
-        self.episode.add(step.reward);
+        self.episode.add(step.reward, &step.info);
         if !(step.terminated || step.truncated) {
             return Ok(Outcome {
                 obs: step.obs,

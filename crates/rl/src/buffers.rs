@@ -1,7 +1,9 @@
 //! Experience storage: the on-policy rollout buffer (with GAE) and the off-policy replay buffer.
 
+use candle_core::Tensor;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// Transitions of one PPO rollout: `n_steps` steps of `n_envs` environments, stored step-major
 /// (`index = step * n_envs + env`), like SB3's `RolloutBuffer`.
@@ -201,6 +203,112 @@ impl ReplayBuffer {
         self.full |= self.position == 0;
     }
 
+    /// The stored transitions (only the filled part) with the write position and the `full`
+    /// flag, as named tensors for a checkpoint: `{prefix}observations`, `…next_observations`
+    /// (`len × obs_dim`), `…actions` (`len × act_dim`), `…rewards`, `…dones` (`len`), `…position`
+    /// and `…full` (one value each).
+    pub fn state(&self, prefix: &str) -> candle_core::Result<HashMap<String, Tensor>> {
+        let dev = &candle_core::Device::Cpu;
+        let n = self.len();
+        let (od, ad) = (self.obs_dim, self.act_dim);
+        let mut out = HashMap::new();
+        let mut put = |name: &str, t: Tensor| out.insert(format!("{prefix}{name}"), t);
+        put(
+            "observations",
+            Tensor::from_slice(&self.observations[..n * od], (n, od), dev)?,
+        );
+        put(
+            "next_observations",
+            Tensor::from_slice(&self.next_observations[..n * od], (n, od), dev)?,
+        );
+        put(
+            "actions",
+            Tensor::from_slice(&self.actions[..n * ad], (n, ad), dev)?,
+        );
+        put("rewards", Tensor::from_slice(&self.rewards[..n], n, dev)?);
+        put("dones", Tensor::from_slice(&self.dones[..n], n, dev)?);
+        put("position", Tensor::new(&[self.position as i64], dev)?);
+        put("full", Tensor::new(&[self.full as u8], dev)?);
+        Ok(out)
+    }
+
+    /// Restores transitions saved by [`Self::state`] into this buffer, which needs the same
+    /// dimensions and room for them. Everything is checked before anything changes; errors name
+    /// the tensor.
+    pub fn load_state(
+        &mut self,
+        state: &HashMap<String, Tensor>,
+        prefix: &str,
+    ) -> Result<(), String> {
+        let get = |name: &str| {
+            let key = format!("{prefix}{name}");
+            state
+                .get(&key)
+                .map(|t| (key.clone(), t))
+                .ok_or_else(|| format!("the training state lacks `{key}`"))
+        };
+        let (key, rewards) = get("rewards")?;
+        let n = match rewards.dims() {
+            &[n] => n,
+            d => return Err(format!("`{key}` has shape {d:?}, expected one dimension")),
+        };
+        // Rows of `cols` values each, as f32.
+        let rows = |name: &str, cols: Option<usize>| -> Result<Vec<f32>, String> {
+            let (key, t) = get(name)?;
+            let want: Vec<usize> = cols.map_or(vec![n], |c| vec![n, c]);
+            if t.dims() != want.as_slice() {
+                return Err(format!(
+                    "`{key}` has shape {:?}, expected {want:?}",
+                    t.dims()
+                ));
+            }
+            t.flatten_all()
+                .and_then(|t| t.to_dtype(candle_core::DType::F32))
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| format!("`{key}`: {e}"))
+        };
+        let observations = rows("observations", Some(self.obs_dim))?;
+        let next_observations = rows("next_observations", Some(self.obs_dim))?;
+        let actions = rows("actions", Some(self.act_dim))?;
+        let rewards = rows("rewards", None)?;
+        let dones = rows("dones", None)?;
+        let scalar = |name: &str| -> Result<i64, String> {
+            let (key, t) = get(name)?;
+            match t
+                .to_dtype(candle_core::DType::I64)
+                .and_then(|t| t.to_vec1::<i64>())
+            {
+                Ok(v) if v.len() == 1 => Ok(v[0]),
+                _ => Err(format!("`{key}` must hold one integer")),
+            }
+        };
+        let position = scalar("position")?;
+        let full = scalar("full")? != 0;
+        // A full buffer holds `capacity` transitions and writes anywhere; a filling one writes
+        // right after its last transition.
+        let consistent = if full {
+            n == self.capacity && (0..n as i64).contains(&position)
+        } else {
+            n < self.capacity && position == n as i64
+        };
+        if !consistent {
+            return Err(format!(
+                "the saved replay buffer ({n} transitions, position {position}, full {full}) \
+                 does not fit this buffer of capacity {}",
+                self.capacity
+            ));
+        }
+        let (od, ad) = (self.obs_dim, self.act_dim);
+        self.observations[..n * od].copy_from_slice(&observations);
+        self.next_observations[..n * od].copy_from_slice(&next_observations);
+        self.actions[..n * ad].copy_from_slice(&actions);
+        self.rewards[..n].copy_from_slice(&rewards);
+        self.dones[..n].copy_from_slice(&dones);
+        self.position = position as usize;
+        self.full = full;
+        Ok(())
+    }
+
     /// Samples `batch` transitions uniformly with replacement into `out`.
     pub fn sample_into(&self, batch: usize, rng: &mut impl Rng, out: &mut ReplaySample) {
         let n = self.len();
@@ -275,5 +383,67 @@ mod tests {
             assert_eq!(sample.next_observations[2 * k], r + 1.0);
             assert_eq!(sample.dones[k], if (r as i32) % 2 == 0 { 1.0 } else { 0.0 });
         }
+    }
+    #[test]
+    fn replay_buffer_state_round_trips_and_a_misfit_changes_nothing() {
+        let push = |buf: &mut ReplayBuffer, count: usize| {
+            for i in 0..count {
+                let x = i as f32;
+                buf.push(&[x, -x], &[0.5 * x], x, &[x + 1.0, 0.0], i % 3 == 0);
+            }
+        };
+        let same = |a: &ReplayBuffer, b: &ReplayBuffer| {
+            let n = a.len();
+            assert_eq!((a.position, a.full, n), (b.position, b.full, b.len()));
+            assert_eq!(a.observations[..2 * n], b.observations[..2 * n]);
+            assert_eq!(a.next_observations[..2 * n], b.next_observations[..2 * n]);
+            assert_eq!(a.actions[..n], b.actions[..n]);
+            assert_eq!(a.rewards[..n], b.rewards[..n]);
+            assert_eq!(a.dones[..n], b.dones[..n]);
+        };
+        // A wrapped (full) buffer.
+        let mut full = ReplayBuffer::new(4, 2, 1);
+        push(&mut full, 6);
+        let state = full.state("r.").unwrap();
+        assert_eq!(state["r.observations"].dims(), &[4, 2]);
+        let mut restored = ReplayBuffer::new(4, 2, 1);
+        restored.load_state(&state, "r.").unwrap();
+        same(&full, &restored);
+        // A filling buffer saves only its filled part and fits a larger buffer, not a smaller.
+        let mut part = ReplayBuffer::new(8, 2, 1);
+        push(&mut part, 3);
+        let state = part.state("r.").unwrap();
+        assert_eq!(state["r.rewards"].dims(), &[3]);
+        let mut larger = ReplayBuffer::new(16, 2, 1);
+        larger.load_state(&state, "r.").unwrap();
+        same(&part, &larger);
+        larger.push(&[9.0, 9.0], &[9.0], 9.0, &[9.0, 9.0], false);
+        assert_eq!(larger.len(), 4);
+        let mut small = ReplayBuffer::new(3, 2, 1);
+        push(&mut small, 5);
+        let before = small.clone();
+        let err = small.load_state(&state, "r.").unwrap_err();
+        assert!(err.contains("capacity 3"), "{err}");
+        same(&before, &small);
+        // A missing or mis-shaped tensor is named.
+        let mut broken = state.clone();
+        broken.remove("r.dones");
+        assert!(
+            larger
+                .load_state(&broken, "r.")
+                .unwrap_err()
+                .contains("`r.dones`")
+        );
+        let mut broken = state.clone();
+        broken.insert(
+            "r.actions".into(),
+            Tensor::zeros((3, 2), candle_core::DType::F32, &candle_core::Device::Cpu).unwrap(),
+        );
+        assert!(
+            larger
+                .load_state(&broken, "r.")
+                .unwrap_err()
+                .contains("`r.actions`")
+        );
     }
 }

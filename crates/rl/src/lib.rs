@@ -8,10 +8,13 @@
 //! network sizes measured 4.8 s with candle against 6.7 s with burn-ndarray, and candle builds in
 //! 2.7 min against 7.8 min (docs/training.md).
 
+pub mod algorithm;
 pub mod buffers;
 pub mod logger;
+pub mod model;
 pub mod nn;
 pub mod ppo;
+pub mod sac;
 pub mod save_util;
 pub mod train;
 

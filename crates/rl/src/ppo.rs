@@ -6,11 +6,14 @@
 //! `−min(r·A, clip(r, 1±ε)·A) + c_v·(V − R)² − c_e·H` with the global gradient norm clipped;
 //! stop the epochs early when the approximate KL exceeds `target_kl`.
 
+use crate::algorithm::{
+    Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
+};
 use crate::buffers::RolloutBuffer;
 use crate::nn::{Activation, Adam, Mlp};
 use candle_core::{D, DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
-use fairgrasp_env::{EnvError, VectorEnv};
+use fairgrasp_env::{EnvError, VecStep, VectorEnv};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -88,6 +91,9 @@ pub enum RlError {
     Candle(#[from] candle_core::Error),
     #[error("invalid setting `{key}`: {problem}")]
     Config { key: String, problem: String },
+    /// A saved model or checkpoint that cannot be used (corrupt, incomplete, mismatched).
+    #[error("{0}")]
+    Model(String),
     #[error("{0}")]
     Other(String),
 }
@@ -252,6 +258,9 @@ pub struct Ppo {
     pub rng: ChaCha8Rng,
     /// Environment steps taken so far (all environments together).
     pub num_timesteps: u64,
+    /// Whether each environment's current observation starts an episode (SB3's
+    /// `_last_episode_starts`).
+    episode_starts: Vec<bool>,
 }
 
 impl Ppo {
@@ -272,20 +281,24 @@ impl Ppo {
             policy,
             optimizer,
             num_timesteps: 0,
+            episode_starts: Vec::new(),
         })
     }
 
     /// Fills the rollout buffer from `venv`, starting from its current observations.
-    /// `on_step` sees every vector step (for episode statistics). Returns whether the last
-    /// observations start new episodes.
+    /// `on_step` sees every vector step (for episode statistics).
     pub fn collect_rollout<V: VectorEnv>(
         &mut self,
         venv: &mut V,
-        episode_starts: &mut [bool],
-        mut on_step: impl FnMut(&fairgrasp_env::VecStep<'_>),
+        on_step: &mut dyn FnMut(&VecStep<'_>),
     ) -> Result<()> {
         let space = venv.action_space().clone();
         let n = venv.num_envs();
+        if self.episode_starts.len() != n {
+            // A fresh learner (or one resumed onto freshly reset environments).
+            self.episode_starts = vec![true; n];
+        }
+        let episode_starts = &mut self.episode_starts;
         self.buffer.clear();
         let mut obs = venv.observations().to_vec();
         let mut clipped = vec![0.0; n * space.dim()];
@@ -452,6 +465,69 @@ impl Ppo {
             .mean_all()?
             .to_scalar::<f32>()?;
         Ok(stats)
+    }
+}
+
+impl Algorithm for Ppo {
+    fn name(&self) -> &'static str {
+        "ppo"
+    }
+
+    fn num_timesteps(&self) -> u64 {
+        self.num_timesteps
+    }
+
+    fn set_num_timesteps(&mut self, steps: u64) {
+        self.num_timesteps = steps;
+    }
+
+    fn learn_iteration<V: VectorEnv>(
+        &mut self,
+        venv: &mut V,
+        progress_remaining: f64,
+        on_step: &mut dyn FnMut(&VecStep<'_>),
+    ) -> Result<Vec<(&'static str, f32)>> {
+        self.collect_rollout(venv, on_step)?;
+        let s = self.update(progress_remaining)?;
+        Ok(vec![
+            ("train/policy_gradient_loss", s.policy_loss),
+            ("train/value_loss", s.value_loss),
+            ("train/entropy_loss", -s.entropy),
+            ("train/approx_kl", s.approx_kl),
+            ("train/clip_fraction", s.clip_fraction),
+            ("train/explained_variance", s.explained_variance),
+            ("train/learning_rate", s.learning_rate as f32),
+            ("train/std", s.std),
+            ("train/grad_norm", s.grad_norm),
+        ])
+    }
+
+    fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        Ok(self.policy.act(obs, deterministic, &mut self.rng)?.actions)
+    }
+
+    fn weights(&self) -> Result<TensorMap> {
+        Ok(varmap_tensors(&self.policy.varmap, ""))
+    }
+
+    fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
+        load_varmap(&self.policy.varmap, weights)
+    }
+
+    fn training_state(&self) -> Result<TensorMap> {
+        let mut state = self.optimizer.state()?;
+        state.extend(rng_state(&self.rng, "ppo.")?);
+        Ok(state)
+    }
+
+    fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
+        self.optimizer.load_state(state).map_err(RlError::Model)?;
+        self.rng = rng_from_state(state, "ppo.")?;
+        Ok(())
+    }
+
+    fn rng_mut(&mut self) -> &mut ChaCha8Rng {
+        &mut self.rng
     }
 }
 

@@ -1,22 +1,46 @@
-//! The training run: environments, PPO, evaluation with best-model saving, checkpoints,
-//! TensorBoard and CSV logs — what SB3's `learn()` with `EvalCallback` and
-//! `CheckpointCallback` gives, in one driver.
+//! The training run: environments, the algorithm (PPO or SAC), evaluation with best-model
+//! saving, checkpoints and resume, TensorBoard and CSV logs — what SB3's `learn()` with
+//! `EvalCallback` and `CheckpointCallback` gives, in one driver.
 //!
 //! A run directory holds `config.toml` (the effective configuration), `tb/` (TensorBoard event
-//! files), `progress.csv`, `best/` (the best model by evaluation success rate, then return) and
-//! `checkpoints/step_<N>/`.
+//! files), `progress.csv`, `best/` (the best model by evaluation success rate, then return),
+//! `final/` and `checkpoints/step_<N>/` (a model plus `training_state.safetensors` and
+//! `trainer_state.json`: what [`resume`] needs to continue).
 
+use crate::algorithm::{Algorithm, TensorMap};
 use crate::logger::{CsvLogger, TensorBoardWriter};
-use crate::ppo::{Ppo, PpoConfig, Result, RlError, UpdateStats};
+use crate::model::{
+    ModelMeta, load_tensors, replace_dir, save_model, save_tensors, write_model_files,
+};
+use crate::ppo::{Ppo, PpoConfig, Result, RlError};
+use crate::sac::{Sac, SacConfig};
 use crate::save_util::write_atomic;
-use candle_core::Tensor;
-use fairgrasp_env::wrappers::{RescaleAction, VecNormalize, VecNormalizeConfig, VecNormalizeState};
+use fairgrasp_env::wrappers::{
+    EpisodeStats, RescaleAction, VecNormalize, VecNormalizeConfig, VecNormalizeState,
+};
 use fairgrasp_env::{Env, EnvConfig, GraspEnv, VecEnv, VectorEnv};
-use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Which algorithm learns.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Algo {
+    #[default]
+    Ppo,
+    Sac,
+}
+
+impl Algo {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Algo::Ppo => "ppo",
+            Algo::Sac => "sac",
+        }
+    }
+}
 
 /// Evaluation during training (like SB3's `EvalCallback`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -39,10 +63,19 @@ impl Default for EvalConfig {
     }
 }
 
+/// Seeds of the evaluations during training: `EVAL_SEED_BASE + episode`. Training episodes
+/// draw from the streams seeded `seed … seed + n_envs`; `fairgrasp eval` defaults to
+/// [`HELD_OUT_SEED_BASE`], so the final figure is measured on episodes that neither trained
+/// the policy nor chose the best model.
+pub const EVAL_SEED_BASE: u64 = 1_000_000;
+/// Default first seed of `fairgrasp eval`.
+pub const HELD_OUT_SEED_BASE: u64 = 2_000_000_000;
+
 /// Everything that defines a training run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
+    pub algo: Algo,
     pub total_timesteps: u64,
     pub seed: u64,
     /// Parallel environments.
@@ -54,12 +87,14 @@ pub struct TrainConfig {
     pub normalize: VecNormalizeConfig,
     pub eval: EvalConfig,
     pub ppo: PpoConfig,
+    pub sac: SacConfig,
     pub env: EnvConfig,
 }
 
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
+            algo: Algo::Ppo,
             total_timesteps: 2_000_000,
             seed: 42,
             n_envs: 4,
@@ -68,6 +103,7 @@ impl Default for TrainConfig {
             normalize: VecNormalizeConfig::default(),
             eval: EvalConfig::default(),
             ppo: PpoConfig::default(),
+            sac: SacConfig::default(),
             env: EnvConfig::default(),
         }
     }
@@ -106,7 +142,10 @@ impl TrainConfig {
         if self.n_envs == 0 || self.n_envs > 1024 {
             return bad("n_envs", "must be in 1..=1024");
         }
-        crate::ppo::validate(&self.ppo, self.n_envs)?;
+        match self.algo {
+            Algo::Ppo => crate::ppo::validate(&self.ppo, self.n_envs)?,
+            Algo::Sac => crate::sac::validate(&self.sac, self.n_envs)?,
+        }
         if self.eval.freq > 0 && self.eval.episodes == 0 {
             return bad("eval.episodes", "must be at least 1 when evaluating");
         }
@@ -121,72 +160,29 @@ impl TrainConfig {
     }
 }
 
-/// What a saved model needs besides its weights (stored as `model.json`).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ModelMeta {
-    pub format_version: u32,
-    pub algo: String,
-    pub obs_dim: usize,
-    pub act_dim: usize,
-    pub ppo: PpoConfig,
-    pub env: EnvConfig,
-    /// Observation normalisation statistics (JSON of `VecNormalizeState`), if used.
-    pub normalization: Option<String>,
-    pub num_timesteps: u64,
-}
-
-/// Saves a model directory: `model.safetensors` (weights) and `model.json`, each atomically.
-pub fn save_model(dir: &Path, ppo: &Ppo, meta: &ModelMeta) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| RlError::Other(format!("{}: {e}", dir.display())))?;
-    let tensors: HashMap<String, Tensor> = ppo
-        .policy
-        .varmap
-        .data()
-        .lock()
-        .expect("varmap lock")
-        .iter()
-        .map(|(k, v)| (k.clone(), v.as_tensor().clone()))
-        .collect();
-    save_tensors(&dir.join("model.safetensors"), &tensors)?;
-    let json = serde_json::to_string_pretty(meta).map_err(|e| RlError::Other(e.to_string()))?;
-    write_atomic(&dir.join("model.json"), json.as_bytes())
-        .map_err(|e| RlError::Other(format!("{}: {e}", dir.display())))
-}
-
-/// Writes tensors as safetensors through a temporary file, so a crash never leaves a torn file.
-pub fn save_tensors(path: &Path, tensors: &HashMap<String, Tensor>) -> Result<()> {
-    let tmp = path.with_extension("safetensors.tmp");
-    candle_core::safetensors::save(tensors, &tmp)?;
-    std::fs::rename(&tmp, path).map_err(|e| RlError::Other(format!("{}: {e}", path.display())))
-}
-
 /// Result of an evaluation.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct EvalResult {
     pub success_rate: f32,
     pub mean_return: f32,
     pub mean_length: f32,
+    pub episodes: u32,
 }
 
-/// Runs the deterministic policy on fresh environments with seeds `seed, seed+1, …`.
+/// Runs a deterministic policy on fresh grasp environments with seeds `seed, seed+1, …`;
+/// `policy` maps one raw observation to one action (it normalises, if the model does).
 pub fn evaluate(
-    ppo: &Ppo,
+    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
     env_config: &EnvConfig,
-    normalization: Option<&VecNormalizeState>,
     episodes: u32,
     seed: u64,
 ) -> Result<EvalResult> {
     let mut env = RescaleAction::new(GraspEnv::new(env_config.clone())?)?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let (mut successes, mut total_return, mut total_length) = (0u32, 0.0f32, 0u64);
     for e in 0..episodes as u64 {
         let (mut obs, _) = env.reset(Some(seed + e))?;
         loop {
-            let input = match normalization {
-                Some(n) => n.normalize_obs(&obs)?,
-                None => obs.clone(),
-            };
-            let mut action = ppo.policy.act(&input, true, &mut rng)?.actions;
+            let mut action = policy(&obs)?;
             env.action_space().clip(&mut action);
             let step = env.step(&action)?;
             total_return += step.reward;
@@ -203,6 +199,7 @@ pub fn evaluate(
         success_rate: successes as f32 / n,
         mean_return: total_return / n,
         mean_length: total_length as f32 / n,
+        episodes,
     })
 }
 
@@ -211,10 +208,17 @@ pub fn evaluate(
 pub struct Progress {
     pub num_timesteps: u64,
     pub total_timesteps: u64,
+    /// Environment steps per second of wall time, updates included.
     pub fps: f64,
     pub ep_rew_mean: Option<f32>,
     pub rollout_success_rate: Option<f32>,
+    /// Share of recent episodes in which the gripper closed on the object.
+    pub rollout_grasp_rate: Option<f32>,
+    /// Mean over recent episodes of the highest lift reached (m).
+    pub rollout_max_lift: Option<f32>,
     pub last_eval: Option<EvalResult>,
+    /// Evaluations run so far (in this session).
+    pub eval_count: usize,
     pub best_success_rate: Option<f32>,
 }
 
@@ -222,150 +226,391 @@ pub struct Progress {
 #[derive(Clone, Debug, Default)]
 pub struct TrainSummary {
     pub num_timesteps: u64,
+    /// Wall time of the whole run, across resumes.
     pub seconds: f64,
     pub best: Option<EvalResult>,
     pub run_dir: PathBuf,
+    /// The step the run resumed from, if it did.
+    pub resumed_from: Option<u64>,
 }
 
-/// Trains PPO on the grasp task as configured, writing everything to `run_dir`.
-pub fn train_ppo(
+/// The driver's own state, saved with each checkpoint (`trainer_state.json`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct TrainerState {
+    format_version: u32,
+    num_timesteps: u64,
+    next_eval: u64,
+    next_checkpoint: u64,
+    best: Option<EvalResult>,
+    /// Wall time spent before this checkpoint (s).
+    elapsed_seconds: f64,
+    recent_episodes: Vec<EpisodeStats>,
+    /// The full normalisation state (JSON of [`VecNormalizeState`]).
+    normalization: String,
+}
+
+const TRAINER_STATE: &str = "trainer_state.json";
+const TRAINING_STATE: &str = "training_state.safetensors";
+
+/// Trains on the grasp task as configured, writing everything to `run_dir`.
+pub fn train(
     config: &TrainConfig,
     run_dir: &Path,
-    mut on_progress: impl FnMut(&Progress),
+    on_progress: impl FnMut(&Progress),
 ) -> Result<TrainSummary> {
     config.validate()?;
     let io = |e: std::io::Error| RlError::Other(format!("{}: {e}", run_dir.display()));
     std::fs::create_dir_all(run_dir).map_err(io)?;
     let effective = toml::to_string(config).map_err(|e| RlError::Other(e.to_string()))?;
     write_atomic(&run_dir.join("config.toml"), effective.as_bytes()).map_err(io)?;
-    let mut tb = TensorBoardWriter::create(&run_dir.join("tb")).map_err(io)?;
-    let mut csv = CsvLogger::open(run_dir).map_err(io)?;
+    dispatch(config, run_dir, None, on_progress)
+}
 
+/// Continues the run in `run_dir` from its latest complete checkpoint, with the configuration
+/// saved there (`overrides` may change keys such as `total_timesteps`). Optimiser state,
+/// normalisation statistics, random streams, step counter, best result and wall time carry
+/// over; the environments start fresh episodes (seeded from the step count), so the resumed
+/// run matches an uninterrupted one in expectation, not bit for bit.
+pub fn resume(
+    run_dir: &Path,
+    overrides: &[String],
+    on_progress: impl FnMut(&Progress),
+) -> Result<TrainSummary> {
+    let config_path = run_dir.join("config.toml");
+    let text = std::fs::read_to_string(&config_path).map_err(|e| {
+        RlError::Model(format!(
+            "cannot resume {}: {}: {e}",
+            run_dir.display(),
+            config_path.display()
+        ))
+    })?;
+    let config = TrainConfig::from_toml_str(&text, overrides)?;
+    let checkpoint = latest_checkpoint(run_dir)?.ok_or_else(|| {
+        RlError::Model(format!(
+            "cannot resume {}: no complete checkpoint in {}",
+            run_dir.display(),
+            run_dir.join("checkpoints").display()
+        ))
+    })?;
+    if !overrides.is_empty() {
+        let effective = toml::to_string(&config).map_err(|e| RlError::Other(e.to_string()))?;
+        write_atomic(&config_path, effective.as_bytes())
+            .map_err(|e| RlError::Other(format!("{}: {e}", config_path.display())))?;
+    }
+    dispatch(&config, run_dir, Some(checkpoint), on_progress)
+}
+
+/// The checkpoint directories of a run, oldest first (incomplete ones are skipped).
+pub fn checkpoints(run_dir: &Path) -> Vec<(u64, PathBuf)> {
+    let mut found: Vec<(u64, PathBuf)> = std::fs::read_dir(run_dir.join("checkpoints"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|entry| {
+            let name = entry.file_name().into_string().ok()?;
+            let step = name.strip_prefix("step_")?.parse().ok()?;
+            let path = entry.path();
+            path.join(TRAINER_STATE).is_file().then_some((step, path))
+        })
+        .collect();
+    found.sort();
+    found
+}
+
+fn latest_checkpoint(run_dir: &Path) -> Result<Option<PathBuf>> {
+    Ok(checkpoints(run_dir).pop().map(|(_, path)| path))
+}
+
+fn dispatch(
+    config: &TrainConfig,
+    run_dir: &Path,
+    checkpoint: Option<PathBuf>,
+    on_progress: impl FnMut(&Progress),
+) -> Result<TrainSummary> {
     let envs = (0..config.n_envs)
         .map(|_| GraspEnv::new(config.env.clone()).and_then(RescaleAction::new))
         .collect::<std::result::Result<Vec<_>, _>>()?;
-    let mut venv = VecNormalize::new(VecEnv::new(envs, config.threads)?, config.normalize.clone())?;
-    venv.reset(Some(config.seed))?;
+    let venv = VecNormalize::new(VecEnv::new(envs, config.threads)?, config.normalize.clone())?;
     let (obs_dim, act_dim) = (venv.obs_dim(), venv.act_dim());
-    let mut ppo = Ppo::new(
-        config.ppo.clone(),
-        obs_dim,
-        act_dim,
-        config.n_envs,
-        config.seed,
-    )?;
-    let meta = |ppo: &Ppo, venv: &VecNormalize<_>| ModelMeta {
-        format_version: 1,
-        algo: "ppo".into(),
-        obs_dim,
-        act_dim,
-        ppo: config.ppo.clone(),
-        env: config.env.clone(),
-        normalization: config.normalize.norm_obs.then(|| venv.state().to_json()),
-        num_timesteps: ppo.num_timesteps,
-    };
+    match config.algo {
+        Algo::Ppo => {
+            let ppo = Ppo::new(
+                config.ppo.clone(),
+                obs_dim,
+                act_dim,
+                config.n_envs,
+                config.seed,
+            )?;
+            run(config, run_dir, ppo, venv, checkpoint, on_progress)
+        }
+        Algo::Sac => {
+            let sac = Sac::new(
+                config.sac.clone(),
+                obs_dim,
+                act_dim,
+                config.n_envs,
+                config.seed,
+            )?;
+            run(config, run_dir, sac, venv, checkpoint, on_progress)
+        }
+    }
+}
 
-    let started = Instant::now();
-    let mut episode_starts = vec![true; config.n_envs];
-    let mut recent: VecDeque<(f64, bool)> = VecDeque::with_capacity(100);
-    let mut progress = Progress {
-        total_timesteps: config.total_timesteps,
-        ..Progress::default()
-    };
+/// The training loop shared by every algorithm.
+fn run<A: Algorithm>(
+    config: &TrainConfig,
+    run_dir: &Path,
+    mut algo: A,
+    mut venv: VecNormalize<VecEnv<RescaleAction<GraspEnv>>>,
+    checkpoint: Option<PathBuf>,
+    mut on_progress: impl FnMut(&Progress),
+) -> Result<TrainSummary> {
+    let io = |e: std::io::Error| RlError::Other(format!("{}: {e}", run_dir.display()));
+    let (obs_dim, act_dim) = (venv.obs_dim(), venv.act_dim());
+    let mut recent: VecDeque<EpisodeStats> = VecDeque::with_capacity(100);
     let mut best: Option<EvalResult> = None;
     let mut next_eval = config.eval.freq;
     let mut next_checkpoint = config.checkpoint_freq;
-    while ppo.num_timesteps < config.total_timesteps {
-        ppo.collect_rollout(&mut venv, &mut episode_starts, |step| {
+    let mut elapsed_before = 0.0;
+    let mut resumed_from = None;
+    let mut csv = CsvLogger::open(run_dir).map_err(io)?;
+
+    if let Some(dir) = &checkpoint {
+        let state = read_trainer_state(dir)?;
+        let meta = ModelMeta::load(dir)?;
+        meta.check_compatible(algo.name(), obs_dim, act_dim)?;
+        algo.load_weights(&load_tensors(&dir.join("model.safetensors"))?)?;
+        algo.load_training_state(&load_tensors(&dir.join(TRAINING_STATE))?)?;
+        algo.set_num_timesteps(state.num_timesteps);
+        let normalization = VecNormalizeState::from_json(&state.normalization)
+            .map_err(|p| RlError::Model(format!("{}: {p}", dir.join(TRAINER_STATE).display())))?;
+        venv.set_state(normalization)?;
+        recent.extend(state.recent_episodes);
+        best = state.best;
+        next_eval = state.next_eval;
+        next_checkpoint = state.next_checkpoint;
+        elapsed_before = state.elapsed_seconds;
+        resumed_from = Some(state.num_timesteps);
+        // Rows logged after the checkpoint belong to the interrupted attempt.
+        csv.truncate_after("time/total_timesteps", state.num_timesteps as f64)
+            .map_err(io)?;
+        // Fresh episodes, on streams that depend on where the run stands.
+        let reseed = config
+            .seed
+            .wrapping_add(state.num_timesteps.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        venv.reset(Some(reseed))?;
+    } else {
+        venv.reset(Some(config.seed))?;
+    }
+    let mut tb = TensorBoardWriter::create(&run_dir.join("tb")).map_err(io)?;
+
+    let meta = |algo: &A, venv: &VecNormalize<_>| ModelMeta {
+        format_version: crate::model::FORMAT_VERSION,
+        algo: algo.name().into(),
+        obs_dim,
+        act_dim,
+        ppo: (config.algo == Algo::Ppo).then(|| config.ppo.clone()),
+        sac: (config.algo == Algo::Sac).then(|| config.sac.clone()),
+        env: config.env.clone(),
+        normalization: config.normalize.norm_obs.then(|| venv.state().to_json()),
+        num_timesteps: algo.num_timesteps(),
+        train_seed: config.seed,
+        n_envs: config.n_envs,
+    };
+
+    let started = Instant::now();
+    let start_steps = algo.num_timesteps();
+    let mut progress = Progress {
+        total_timesteps: config.total_timesteps,
+        best_success_rate: best.as_ref().map(|b| b.success_rate),
+        ..Progress::default()
+    };
+    // Off-policy learners iterate once per vector step: log those every 1,000 steps.
+    let log_every = match config.algo {
+        Algo::Ppo => 0,
+        Algo::Sac => 1000,
+    };
+    let mut last_log = algo.num_timesteps();
+    while algo.num_timesteps() < config.total_timesteps {
+        let remaining = 1.0 - algo.num_timesteps() as f64 / config.total_timesteps as f64;
+        let mut on_step = |step: &fairgrasp_env::VecStep<'_>| {
             for end in step.episode_ends.iter().flatten() {
                 if recent.len() == 100 {
                     recent.pop_front();
                 }
-                recent.push_back((end.episode.episode_return, end.episode.success));
+                recent.push_back(end.episode);
             }
-        })?;
-        let remaining = 1.0 - ppo.num_timesteps as f64 / config.total_timesteps as f64;
-        let stats = ppo.update(remaining)?;
-        let elapsed = started.elapsed().as_secs_f64();
-        progress.num_timesteps = ppo.num_timesteps;
-        progress.fps = ppo.num_timesteps as f64 / elapsed.max(1e-9);
+        };
+        let train_scalars = algo.learn_iteration(&mut venv, remaining, &mut on_step)?;
+        let steps = algo.num_timesteps();
+        let session = started.elapsed().as_secs_f64();
+        progress.num_timesteps = steps;
+        progress.fps = (steps - start_steps) as f64 / session.max(1e-9);
         if !recent.is_empty() {
             let n = recent.len() as f32;
-            progress.ep_rew_mean = Some(recent.iter().map(|r| r.0 as f32).sum::<f32>() / n);
-            progress.rollout_success_rate = Some(recent.iter().filter(|r| r.1).count() as f32 / n);
+            let mean = |f: fn(&EpisodeStats) -> f32| recent.iter().map(f).sum::<f32>() / n;
+            progress.ep_rew_mean = Some(mean(|e| e.episode_return as f32));
+            progress.rollout_success_rate = Some(mean(|e| e.success as u8 as f32));
+            progress.rollout_grasp_rate = Some(mean(|e| e.grasped as u8 as f32));
+            progress.rollout_max_lift = Some(mean(|e| e.max_lift));
         }
-        log_update(&mut tb, &mut csv, &progress, &stats).map_err(io)?;
+        if !train_scalars.is_empty() && steps - last_log >= log_every {
+            last_log = steps;
+            log_iteration(
+                &mut tb,
+                &mut csv,
+                &progress,
+                elapsed_before + session,
+                &train_scalars,
+            )
+            .map_err(io)?;
+        }
 
-        if config.eval.freq > 0 && ppo.num_timesteps >= next_eval {
+        let mut stop = false;
+        if config.eval.freq > 0 && steps >= next_eval {
             next_eval += config.eval.freq;
-            let norm = config.normalize.norm_obs.then(|| venv.state());
-            let result = evaluate(&ppo, &config.env, norm, config.eval.episodes, 1_000_000)?;
+            let norm = config.normalize.norm_obs.then(|| venv.state().clone());
+            let mut policy = |obs: &[f32]| -> Result<Vec<f32>> {
+                let input = match &norm {
+                    Some(n) => n.normalize_obs(obs)?,
+                    None => obs.to_vec(),
+                };
+                algo.predict(&input, true)
+            };
+            let result = evaluate(
+                &mut policy,
+                &config.env,
+                config.eval.episodes,
+                EVAL_SEED_BASE,
+            )?;
             let scalars = [
                 ("eval/success_rate", result.success_rate),
                 ("eval/mean_reward", result.mean_return),
                 ("eval/mean_ep_length", result.mean_length),
             ];
-            tb.add_scalars(ppo.num_timesteps, &scalars).map_err(io)?;
+            tb.add_scalars(steps, &scalars).map_err(io)?;
+            let mut row: Vec<(&str, f64)> = scalars.iter().map(|(k, v)| (*k, *v as f64)).collect();
+            row.push(("time/total_timesteps", steps as f64));
+            row.push((
+                "time/time_elapsed",
+                elapsed_before + started.elapsed().as_secs_f64(),
+            ));
+            csv.write_row(&row).map_err(io)?;
             let better = best.as_ref().is_none_or(|b| {
                 (result.success_rate, result.mean_return) > (b.success_rate, b.mean_return)
             });
             if better {
-                save_model(&run_dir.join("best"), &ppo, &meta(&ppo, &venv))?;
+                save_model(&run_dir.join("best"), &algo.weights()?, &meta(&algo, &venv))?;
                 best = Some(result.clone());
             }
             progress.best_success_rate = best.as_ref().map(|b| b.success_rate);
             progress.last_eval = Some(result.clone());
-            if let Some(threshold) = config.eval.success_threshold
-                && result.success_rate >= threshold
-            {
-                on_progress(&progress);
-                break;
-            }
+            progress.eval_count += 1;
+            stop = config
+                .eval
+                .success_threshold
+                .is_some_and(|t| result.success_rate >= t);
         }
-        if config.checkpoint_freq > 0 && ppo.num_timesteps >= next_checkpoint {
+        if config.checkpoint_freq > 0 && steps >= next_checkpoint {
             next_checkpoint += config.checkpoint_freq;
-            let dir = run_dir
-                .join("checkpoints")
-                .join(format!("step_{}", ppo.num_timesteps));
-            save_model(&dir, &ppo, &meta(&ppo, &venv))?;
-            save_tensors(&dir.join("optimizer.safetensors"), &ppo.optimizer.state()?)?;
+            let state = TrainerState {
+                format_version: 1,
+                num_timesteps: steps,
+                next_eval,
+                next_checkpoint,
+                best: best.clone(),
+                elapsed_seconds: elapsed_before + started.elapsed().as_secs_f64(),
+                recent_episodes: recent.iter().copied().collect(),
+                normalization: venv.state().to_json(),
+            };
+            write_checkpoint(run_dir, &algo, &meta(&algo, &venv), &state)?;
         }
         tb.flush().map_err(io)?;
         on_progress(&progress);
+        if stop {
+            break;
+        }
     }
-    save_model(&run_dir.join("final"), &ppo, &meta(&ppo, &venv))?;
+    save_model(
+        &run_dir.join("final"),
+        &algo.weights()?,
+        &meta(&algo, &venv),
+    )?;
     tb.flush().map_err(io)?;
     Ok(TrainSummary {
-        num_timesteps: ppo.num_timesteps,
-        seconds: started.elapsed().as_secs_f64(),
+        num_timesteps: algo.num_timesteps(),
+        seconds: elapsed_before + started.elapsed().as_secs_f64(),
         best,
         run_dir: run_dir.to_path_buf(),
+        resumed_from,
     })
 }
 
-fn log_update(
+/// Writes `checkpoints/step_<N>/` through a staging directory, so an interrupted write never
+/// leaves a checkpoint that [`resume`] would pick.
+fn write_checkpoint<A: Algorithm>(
+    run_dir: &Path,
+    algo: &A,
+    meta: &ModelMeta,
+    state: &TrainerState,
+) -> Result<()> {
+    let dir = run_dir
+        .join("checkpoints")
+        .join(format!("step_{}", state.num_timesteps));
+    let staging = run_dir
+        .join("checkpoints")
+        .join(format!(".step_{}.partial", state.num_timesteps));
+    let _ = std::fs::remove_dir_all(&staging);
+    write_model_files(&staging, &algo.weights()?, meta)?;
+    let training: TensorMap = algo.training_state()?;
+    save_tensors(&staging.join(TRAINING_STATE), &training)?;
+    let json = serde_json::to_string(state).map_err(|e| RlError::Other(e.to_string()))?;
+    write_atomic(&staging.join(TRAINER_STATE), json.as_bytes())
+        .map_err(|e| RlError::Other(format!("{}: {e}", staging.display())))?;
+    replace_dir(&staging, &dir)
+}
+
+fn read_trainer_state(dir: &Path) -> Result<TrainerState> {
+    let path = dir.join(TRAINER_STATE);
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| RlError::Model(format!("{}: {e}", path.display())))?;
+    let state: TrainerState = serde_json::from_str(&text).map_err(|e| {
+        RlError::Model(format!(
+            "{}: not a fairgrasp trainer state: {e}",
+            path.display()
+        ))
+    })?;
+    if state.format_version != 1 {
+        return Err(RlError::Model(format!(
+            "{}: format version {} is not supported (this build reads 1)",
+            path.display(),
+            state.format_version
+        )));
+    }
+    Ok(state)
+}
+
+fn log_iteration(
     tb: &mut TensorBoardWriter,
     csv: &mut CsvLogger,
     p: &Progress,
-    s: &UpdateStats,
+    elapsed: f64,
+    train_scalars: &[(&'static str, f32)],
 ) -> std::io::Result<()> {
-    let mut scalars = vec![
-        ("train/policy_gradient_loss", s.policy_loss),
-        ("train/value_loss", s.value_loss),
-        ("train/entropy_loss", -s.entropy),
-        ("train/approx_kl", s.approx_kl),
-        ("train/clip_fraction", s.clip_fraction),
-        ("train/explained_variance", s.explained_variance),
-        ("train/learning_rate", s.learning_rate as f32),
-        ("train/std", s.std),
-        ("train/grad_norm", s.grad_norm),
-        ("time/fps", p.fps as f32),
-    ];
+    let mut scalars = train_scalars.to_vec();
+    scalars.push(("time/fps", p.fps as f32));
+    scalars.push(("time/time_elapsed", elapsed as f32));
     if let Some(r) = p.ep_rew_mean {
         scalars.push(("rollout/ep_rew_mean", r));
     }
     if let Some(r) = p.rollout_success_rate {
         scalars.push(("rollout/success_rate", r));
+    }
+    if let Some(r) = p.rollout_grasp_rate {
+        scalars.push(("rollout/grasp_rate", r));
+    }
+    if let Some(r) = p.rollout_max_lift {
+        scalars.push(("rollout/max_lift", r));
     }
     tb.add_scalars(p.num_timesteps, &scalars)?;
     let mut row: Vec<(&str, f64)> = scalars.iter().map(|(k, v)| (*k, *v as f64)).collect();

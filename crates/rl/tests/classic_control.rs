@@ -43,9 +43,8 @@ fn ppo_learns_point_reach() {
     };
     let mut ppo = Ppo::new(config, 6, 2, n_envs, 7).unwrap();
     let before = evaluate(&ppo, 20);
-    let mut starts = vec![true; n_envs];
     while ppo.num_timesteps < 60_000 {
-        ppo.collect_rollout(&mut venv, &mut starts, |_| {}).unwrap();
+        ppo.collect_rollout(&mut venv, &mut |_| {}).unwrap();
         let progress = 1.0 - ppo.num_timesteps as f64 / 60_000.0;
         let stats = ppo.update(progress).unwrap();
         assert!(stats.policy_loss.is_finite() && stats.value_loss.is_finite());

@@ -1,20 +1,50 @@
-//! A short training run writes what SB3 users expect, readable by an event-file reader.
+//! A short training run writes what SB3 users expect, readable by an event-file reader; runs
+//! resume from checkpoints; saved models load back or fail with a clear error.
 
 use fairgrasp_rl::logger::read_scalars;
-use fairgrasp_rl::train::{TrainConfig, train_ppo};
+use fairgrasp_rl::model::{LoadedModel, load_tensors};
+use fairgrasp_rl::train::{TrainConfig, checkpoints, resume, train};
+use std::path::Path;
+
+/// A tiny PPO run: 2 envs × 128 steps per iteration, 4 minibatches × 2 epochs per update.
+fn tiny_config(total: u64) -> TrainConfig {
+    TrainConfig::from_toml_str(
+        &format!(
+            "total_timesteps = {total}\nn_envs = 2\nthreads = 1\ncheckpoint_freq = 512\n\
+             [eval]\nfreq = 512\nepisodes = 1\n\
+             [ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 2\n\
+             [env.task]\nmax_episode_steps = 20\n"
+        ),
+        &["env.reward.kind=staged".into()],
+    )
+    .unwrap()
+}
+
+/// The optimiser's step counter stored in a checkpoint.
+fn adam_steps(checkpoint: &Path) -> f64 {
+    let state = load_tensors(&checkpoint.join("training_state.safetensors")).unwrap();
+    state["adam.step"].to_vec1::<f64>().unwrap()[0]
+}
+
+/// The `time/total_timesteps` column of progress.csv.
+fn logged_steps(run: &Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(run.join("progress.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = header
+        .iter()
+        .position(|c| *c == "time/total_timesteps")
+        .unwrap();
+    lines
+        .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
+        .collect()
+}
 
 #[test]
 fn a_short_run_writes_config_logs_best_model_and_checkpoints() {
     let dir = tempfile::tempdir().unwrap();
-    let config = TrainConfig::from_toml_str(
-        "total_timesteps = 1024\nn_envs = 2\nthreads = 1\ncheckpoint_freq = 512\n\
-         [eval]\nfreq = 512\nepisodes = 1\n\
-         [ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 2\n\
-         [env.task]\nmax_episode_steps = 20\n",
-        &["env.reward.kind=staged".into()],
-    )
-    .unwrap();
-    let summary = train_ppo(&config, dir.path(), |_| {}).unwrap();
+    let config = tiny_config(1024);
+    let summary = train(&config, dir.path(), |_| {}).unwrap();
     assert!(summary.num_timesteps >= 1024);
     for file in [
         "config.toml",
@@ -26,7 +56,14 @@ fn a_short_run_writes_config_logs_best_model_and_checkpoints() {
         assert!(dir.path().join(file).is_file(), "{file} missing");
     }
     let checkpoint = dir.path().join("checkpoints/step_512");
-    assert!(checkpoint.join("optimizer.safetensors").is_file());
+    for file in [
+        "model.safetensors",
+        "model.json",
+        "training_state.safetensors",
+        "trainer_state.json",
+    ] {
+        assert!(checkpoint.join(file).is_file(), "checkpoint lacks {file}");
+    }
     // The effective configuration is saved and loads back equal.
     let saved = std::fs::read_to_string(dir.path().join("config.toml")).unwrap();
     assert_eq!(TrainConfig::from_toml_str(&saved, &[]).unwrap(), config);
@@ -47,8 +84,13 @@ fn a_short_run_writes_config_logs_best_model_and_checkpoints() {
         "train/approx_kl",
         "train/clip_fraction",
         "train/explained_variance",
+        "train/learning_rate",
+        "train/std",
         "time/fps",
+        "time/time_elapsed",
         "eval/success_rate",
+        "eval/mean_reward",
+        "eval/mean_ep_length",
     ] {
         assert!(
             scalars.iter().any(|s| s.tag == tag),
@@ -79,4 +121,97 @@ fn training_config_errors_name_the_key() {
             .to_string();
         assert!(err.contains(key), "{text}: {err}");
     }
+}
+
+#[test]
+fn a_resumed_run_continues_counters_optimizer_and_logs_from_the_last_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path();
+    // Without a checkpoint there is nothing to resume.
+    std::fs::create_dir_all(run).unwrap();
+    std::fs::write(run.join("config.toml"), "").unwrap();
+    let err = resume(run, &[], |_| {}).err().unwrap().to_string();
+    assert!(err.contains("no complete checkpoint"), "{err}");
+
+    // "Interrupted" after 1024 steps: checkpoints at 512 and 1024, plus an unfinished one.
+    train(&tiny_config(1024), run, |_| {}).unwrap();
+    std::fs::create_dir_all(run.join("checkpoints/.step_1280.partial")).unwrap();
+    std::fs::create_dir_all(run.join("checkpoints/step_1536")).unwrap(); // no trainer state
+    let steps: Vec<u64> = checkpoints(run).iter().map(|c| c.0).collect();
+    assert_eq!(steps, [512, 1024]);
+    // 1024 steps = 4 iterations of 256, each 2 epochs × 4 minibatches.
+    assert_eq!(adam_steps(&run.join("checkpoints/step_1024")), 32.0);
+
+    let summary = resume(run, &["total_timesteps=2048".into()], |_| {}).unwrap();
+    assert_eq!(summary.resumed_from, Some(1024));
+    assert_eq!(summary.num_timesteps, 2048);
+    // The optimiser went on counting from the checkpoint (a fresh one would stand at 32).
+    assert_eq!(adam_steps(&run.join("checkpoints/step_2048")), 64.0);
+    let saved = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert_eq!(
+        TrainConfig::from_toml_str(&saved, &[])
+            .unwrap()
+            .total_timesteps,
+        2048
+    );
+    // Training rows are logged once per step count, in order, across the resume.
+    let logged = logged_steps(run);
+    let train_rows: Vec<f64> = logged
+        .iter()
+        .copied()
+        .filter(|s| s % 256.0 == 0.0)
+        .collect();
+    assert!(train_rows.contains(&1280.0) && train_rows.contains(&2048.0));
+    let mut sorted = logged.clone();
+    sorted.sort_by(f64::total_cmp);
+    assert_eq!(logged, sorted, "progress.csv out of order: {logged:?}");
+    // Two event files: the first attempt's and the resumed one's.
+    assert_eq!(std::fs::read_dir(run.join("tb")).unwrap().count(), 2);
+}
+
+#[test]
+fn saved_models_load_and_corrupt_or_mismatched_ones_fail_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path();
+    train(&tiny_config(512), run, |_| {}).unwrap();
+    // A run directory means its best model; it acts on raw observations.
+    let mut model = LoadedModel::load(run).unwrap();
+    assert_eq!(model.meta.algo, "ppo");
+    let action = model.act(&vec![0.0; model.meta.obs_dim]).unwrap();
+    assert_eq!(action.len(), model.meta.act_dim);
+    let err = model.act(&[0.0; 3]).err().unwrap().to_string();
+    assert!(err.contains("3 values"), "{err}");
+
+    let copy = |name: &str| {
+        let target = run.join(name);
+        std::fs::create_dir_all(&target).unwrap();
+        for f in ["model.json", "model.safetensors"] {
+            std::fs::copy(run.join("best").join(f), target.join(f)).unwrap();
+        }
+        target
+    };
+    let corrupt = copy("corrupt");
+    std::fs::write(corrupt.join("model.safetensors"), b"not a tensor file").unwrap();
+    let err = LoadedModel::load(&corrupt).err().unwrap().to_string();
+    assert!(err.contains("model.safetensors"), "{err}");
+
+    let truncated = copy("truncated");
+    std::fs::write(truncated.join("model.json"), b"{\"format_version\": 1").unwrap();
+    let err = LoadedModel::load(&truncated).err().unwrap().to_string();
+    assert!(err.contains("not a fairgrasp model"), "{err}");
+
+    let mismatched = copy("mismatched");
+    let json = std::fs::read_to_string(mismatched.join("model.json")).unwrap();
+    let original = format!("\"obs_dim\": {}", model.meta.obs_dim);
+    assert!(json.contains(&original));
+    let json = json.replacen(&original, "\"obs_dim\": 23", 1);
+    std::fs::write(mismatched.join("model.json"), json).unwrap();
+    let err = LoadedModel::load(&mismatched).err().unwrap().to_string();
+    assert!(err.contains("shape"), "{err}");
+
+    let err = LoadedModel::load(&run.join("nowhere"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("no model here"), "{err}");
 }

@@ -241,7 +241,9 @@ mod tests {
         for _ in 0..20 {
             let q: Vec<f64> = (0..6).map(|_| rng.random_range(-2.0..2.0)).collect();
             let (pose, jac) = chain.jacobian(&q);
-            assert!((pose.translation.vector - chain.forward(&q).translation.vector).norm() < 1e-12);
+            assert!(
+                (pose.translation.vector - chain.forward(&q).translation.vector).norm() < 1e-12
+            );
             let h = 1e-6;
             for i in 0..6 {
                 let (mut plus, mut minus) = (q.clone(), q.clone());

@@ -20,6 +20,10 @@ pub struct EpisodeStats {
     /// [`Info::success`] of the episode's final step (SB3's `info["is_success"]`).
     #[serde(rename = "is_success")]
     pub success: bool,
+    /// The gripper closed on the object at some step ([`Info::grasped`]).
+    pub grasped: bool,
+    /// Highest object lift reached (m, [`Info::lift`]).
+    pub max_lift: f32,
 }
 
 /// Accumulates the current episode (shared with [`crate::vector::VecEnv`]).
@@ -27,12 +31,16 @@ pub struct EpisodeStats {
 pub(crate) struct EpisodeAccumulator {
     episode_return: f64,
     length: u32,
+    grasped: bool,
+    max_lift: f32,
 }
 
 impl EpisodeAccumulator {
-    pub(crate) fn add(&mut self, reward: f32) {
+    pub(crate) fn add(&mut self, reward: f32, info: &Info) {
         self.episode_return += reward as f64;
         self.length += 1;
+        self.grasped |= info.grasped;
+        self.max_lift = self.max_lift.max(info.lift);
     }
 
     /// The finished episode's statistics; starts a new episode.
@@ -41,6 +49,8 @@ impl EpisodeAccumulator {
             episode_return: self.episode_return,
             length: self.length,
             success,
+            grasped: self.grasped,
+            max_lift: self.max_lift,
         };
         *self = Self::default();
         stats
@@ -146,7 +156,7 @@ impl<E: Env> Env for RecordEpisodeStatistics<E> {
 
     fn step(&mut self, action: &[f32]) -> Result<Step> {
         let step = self.env.step(action)?;
-        self.current.add(step.reward);
+        self.current.add(step.reward, &step.info);
         self.last = None;
         if step.terminated || step.truncated {
             let stats = self.current.finish(step.info.success);

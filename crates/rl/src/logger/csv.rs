@@ -59,6 +59,18 @@ impl CsvLogger {
         }
     }
 
+    /// Drops the rows whose `column` is above `value` (a resumed run discards what the
+    /// interrupted attempt logged after its last checkpoint).
+    pub fn truncate_after(&mut self, column: &str, value: f64) -> io::Result<()> {
+        let before = self.rows.len();
+        self.rows
+            .retain(|row| row.get(column).is_none_or(|v| *v <= value));
+        if self.rows.len() != before {
+            self.rewrite()?;
+        }
+        Ok(())
+    }
+
     fn format_row(&self, row: &BTreeMap<String, f64>) -> String {
         self.columns
             .iter()

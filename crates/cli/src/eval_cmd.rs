@@ -1,0 +1,83 @@
+//! `fairgrasp eval`: a saved model's deterministic success rate, mean return and episode length
+//! on held-out episodes.
+
+use anyhow::{Context, Result};
+use fairgrasp_rl::model::LoadedModel;
+use fairgrasp_rl::train::{EVAL_SEED_BASE, HELD_OUT_SEED_BASE, evaluate};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    /// Model directory (`runs/NAME/best`, `runs/NAME/final`, a checkpoint) or a run directory
+    /// (its best model).
+    #[arg(long)]
+    pub model: PathBuf,
+    #[arg(long, default_value_t = 100)]
+    pub episodes: u32,
+    /// First episode seed; episode k uses seed + k. The default range is used neither by
+    /// training nor by the evaluations that chose the best model.
+    #[arg(long, default_value_t = HELD_OUT_SEED_BASE)]
+    pub seed: u64,
+    /// Change the environment the model is evaluated in, e.g. `--set randomization.enabled=true`
+    /// (by default: the environment it was trained on).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: &EvalArgs) -> Result<()> {
+    anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
+    let mut model = LoadedModel::load(&args.model)
+        .with_context(|| format!("cannot load model {}", args.model.display()))?;
+    let env =
+        fairgrasp_env::EnvConfig::from_toml_str(&model.meta.env.to_toml_string(), &args.overrides)
+            .context("invalid --set")?;
+    let seeds = args.seed..args.seed.saturating_add(args.episodes as u64);
+    let meta = &model.meta;
+    let train_seeds = meta.train_seed..meta.train_seed + meta.n_envs.max(1) as u64;
+    let overlaps = |r: &std::ops::Range<u64>| seeds.start < r.end && r.start < seeds.end;
+    if overlaps(&train_seeds) || overlaps(&(EVAL_SEED_BASE..EVAL_SEED_BASE + 10_000)) {
+        eprintln!(
+            "warning: seeds {}..{} overlap those of training ({}..{}) or of its evaluations ({}..): the result is not held-out",
+            seeds.start, seeds.end, train_seeds.start, train_seeds.end, EVAL_SEED_BASE
+        );
+    }
+    let started = std::time::Instant::now();
+    let result = evaluate(&mut |obs| model.act(obs), &env, args.episodes, args.seed)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let meta = &model.meta;
+    if args.json {
+        println!(
+            "{{\"model\": {:?}, \"algo\": {:?}, \"trained_steps\": {}, \"episodes\": {}, \"seed\": {}, \"success_rate\": {}, \"mean_return\": {}, \"mean_length\": {}, \"seconds\": {seconds:.2}}}",
+            model.dir.display().to_string(),
+            meta.algo,
+            meta.num_timesteps,
+            args.episodes,
+            args.seed,
+            result.success_rate,
+            result.mean_return,
+            result.mean_length
+        );
+    } else {
+        println!(
+            "{} ({}, trained {} steps), {} episodes from seed {}:",
+            model.dir.display(),
+            meta.algo,
+            meta.num_timesteps,
+            args.episodes,
+            args.seed
+        );
+        println!(
+            "  success rate {:.1}% ({} of {})",
+            result.success_rate * 100.0,
+            (result.success_rate * args.episodes as f32).round() as u32,
+            args.episodes
+        );
+        println!("  mean return  {:.2}", result.mean_return);
+        println!("  mean length  {:.1} steps", result.mean_length);
+        println!("  ({seconds:.1} s)");
+    }
+    Ok(())
+}
