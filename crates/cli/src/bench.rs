@@ -18,6 +18,9 @@ pub enum BenchCommand {
     /// Environment steps per second with random actions: one env on one thread, and the
     /// vectorised env on 1 and 2 threads.
     Env(EnvBenchArgs),
+    /// The learning benchmark: train PPO and SAC with their defaults, evaluate on held-out
+    /// episodes, write success against steps and wall time to docs/benchmarks.md.
+    Learning(crate::bench_learning::LearningBenchArgs),
 }
 
 #[derive(clap::Args)]
@@ -51,6 +54,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Physics(args) => physics(&args),
         BenchCommand::Env(args) => env(&args),
+        BenchCommand::Learning(args) => crate::bench_learning::run(&args),
     }
 }
 

@@ -2,6 +2,7 @@
 //! calls the library crates and prints.
 
 mod bench;
+mod bench_learning;
 mod demo;
 mod env_cmd;
 mod eval_cmd;

@@ -184,11 +184,18 @@ fn print_summary(summary: &TrainSummary) -> Result<()> {
         println!("resumed from step {step}");
     }
     println!(
-        "trained {} steps in {:.0} s; run directory {}",
+        "trained {} steps in {:.0} s ({:.0} steps/s); run directory {}",
         summary.num_timesteps,
         summary.seconds,
+        summary.fps,
         summary.run_dir.display()
     );
+    if summary.reached_threshold {
+        println!("stopped early: the evaluation success threshold was reached");
+    }
+    if let Some(mib) = summary.peak_memory_mib {
+        println!("peak memory {mib:.0} MiB");
+    }
     if let Some(best) = &summary.best {
         println!(
             "best evaluation: success {:.0}%, mean return {:.2}, mean length {:.1} (model in {})",

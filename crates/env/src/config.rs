@@ -42,7 +42,7 @@ pub enum RewardKind {
     Hybrid,
     /// Dense and staged like ManiSkill's PickCube, shifted to be ≤ 0 so that finishing early
     /// always pays: `(reach + grasped + lift) / 3 − 1` per step, with reach = 1 − tanh(4·d),
-    /// grasped ∈ {0, 1}, lift = 1 − tanh(20·max(0, min_lift + 1 cm − lift)) while grasped.
+    /// grasped ∈ {0, 1}, lift = min(lift / (min_lift + 1 cm), 1) while grasped.
     /// Knocking the object off the table costs the worst reward for every remaining step, so
     /// it never pays to end an episode that way.
     Staged,

@@ -52,7 +52,7 @@ pub struct RewardTerms {
     pub success: f32,
     /// Staged reward: reaching stage, `(1 − tanh(4·d)) / 3`.
     pub reach: f32,
-    /// Staged reward: lifting stage while grasped, `(1 − tanh(20·shortfall)) / 3`.
+    /// Staged reward: lifting stage while grasped, `min(lift / (min_lift + 1 cm), 1) / 3`.
     pub lift: f32,
 }
 

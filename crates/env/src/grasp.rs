@@ -301,9 +301,10 @@ impl GraspEnv {
                 terms.reach = third * (1.0 - (4.0 * distance).tanh());
                 if status.closed_on_object {
                     terms.grasp = third;
-                    let shortfall =
-                        (self.config.task.success_min_lift + 0.01 - status.lift as f32).max(0.0);
-                    terms.lift = third * (1.0 - (20.0 * shortfall).tanh());
+                    // Linear in the lift: a steady gradient from the table up (a tanh
+                    // saturating at the goal gave too little pull for the first centimetres).
+                    let goal = self.config.task.success_min_lift + 0.01;
+                    terms.lift = third * (status.lift as f32 / goal).clamp(0.0, 1.0);
                 }
                 terms.time = -1.0;
                 if off_table {

@@ -84,6 +84,8 @@ pub struct TrainConfig {
     pub threads: usize,
     /// Save a checkpoint every this many environment steps (0: never).
     pub checkpoint_freq: u64,
+    /// Stop after this much wall time (s), across resumes (a time budget for benchmarks).
+    pub max_seconds: Option<f64>,
     pub normalize: VecNormalizeConfig,
     pub eval: EvalConfig,
     pub ppo: PpoConfig,
@@ -100,6 +102,7 @@ impl Default for TrainConfig {
             n_envs: 4,
             threads: 2,
             checkpoint_freq: 200_000,
+            max_seconds: None,
             normalize: VecNormalizeConfig::default(),
             eval: EvalConfig::default(),
             ppo: PpoConfig::default(),
@@ -138,6 +141,12 @@ impl TrainConfig {
         };
         if self.total_timesteps == 0 {
             return bad("total_timesteps", "must be at least 1");
+        }
+        if self
+            .max_seconds
+            .is_some_and(|s| !(s.is_finite() && s > 0.0))
+        {
+            return bad("max_seconds", "must be a positive number of seconds");
         }
         if self.n_envs == 0 || self.n_envs > 1024 {
             return bad("n_envs", "must be in 1..=1024");
@@ -222,16 +231,31 @@ pub struct Progress {
     pub best_success_rate: Option<f32>,
 }
 
-/// Summary of a finished run.
-#[derive(Clone, Debug, Default)]
+/// Summary of a finished run (also written to `summary.json` in the run directory).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct TrainSummary {
+    pub algo: String,
     pub num_timesteps: u64,
     /// Wall time of the whole run, across resumes.
     pub seconds: f64,
+    /// Environment steps per second of this session, updates and evaluations included.
+    pub fps: f64,
+    /// Peak resident memory of the process (MiB), where the system reports it.
+    pub peak_memory_mib: Option<f64>,
     pub best: Option<EvalResult>,
     pub run_dir: PathBuf,
     /// The step the run resumed from, if it did.
     pub resumed_from: Option<u64>,
+    /// Whether the run stopped early at the evaluation success threshold.
+    pub reached_threshold: bool,
+}
+
+/// Peak resident set size of this process in MiB (Linux: `VmHWM`).
+pub fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 /// The driver's own state, saved with each checkpoint (`trainer_state.json`).
@@ -373,6 +397,7 @@ fn run<A: Algorithm>(
     let mut next_checkpoint = config.checkpoint_freq;
     let mut elapsed_before = 0.0;
     let mut resumed_from = None;
+    let mut reached_threshold = false;
     let mut csv = CsvLogger::open(run_dir).map_err(io)?;
 
     if let Some(dir) = &checkpoint {
@@ -528,6 +553,13 @@ fn run<A: Algorithm>(
         tb.flush().map_err(io)?;
         on_progress(&progress);
         if stop {
+            reached_threshold = true;
+            break;
+        }
+        if config
+            .max_seconds
+            .is_some_and(|limit| elapsed_before + started.elapsed().as_secs_f64() >= limit)
+        {
             break;
         }
     }
@@ -537,13 +569,21 @@ fn run<A: Algorithm>(
         &meta(&algo, &venv),
     )?;
     tb.flush().map_err(io)?;
-    Ok(TrainSummary {
+    let session = started.elapsed().as_secs_f64();
+    let summary = TrainSummary {
+        algo: algo.name().into(),
         num_timesteps: algo.num_timesteps(),
-        seconds: elapsed_before + started.elapsed().as_secs_f64(),
+        seconds: elapsed_before + session,
+        fps: (algo.num_timesteps() - start_steps) as f64 / session.max(1e-9),
+        peak_memory_mib: peak_memory_mib(),
         best,
         run_dir: run_dir.to_path_buf(),
         resumed_from,
-    })
+        reached_threshold,
+    };
+    let json = serde_json::to_string_pretty(&summary).map_err(|e| RlError::Other(e.to_string()))?;
+    write_atomic(&run_dir.join("summary.json"), json.as_bytes()).map_err(io)?;
+    Ok(summary)
 }
 
 /// Writes `checkpoints/step_<N>/` through a staging directory, so an interrupted write never

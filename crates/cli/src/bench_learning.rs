@@ -1,0 +1,339 @@
+//! `fairgrasp bench learning`: the learning benchmark. Trains each algorithm with its default
+//! configuration (each in a child process, so the peak memory is that run's), evaluates the best
+//! model on held-out episodes, and writes success rate against environment steps and against
+//! wall time (a table and an SVG plot) into docs/benchmarks.md.
+//!
+//! The figures are generated, never typed: the section between the `learning` markers of the
+//! output file is rewritten, the rest of the file is kept.
+
+use anyhow::{Context, Result, bail};
+use fairgrasp_rl::model::LoadedModel;
+use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary, evaluate};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct LearningBenchArgs {
+    /// Algorithms to train, in order [default: ppo and sac].
+    #[arg(long = "algo", value_parser = ["ppo", "sac"])]
+    pub algos: Vec<String>,
+    /// Summarise a finished run instead of training: `--run ppo=runs/ppo_grasp`.
+    #[arg(long = "run", value_name = "ALGO=RUN_DIR")]
+    pub runs: Vec<String>,
+    /// Wall-clock budget of each training run (minutes).
+    #[arg(long, default_value_t = 30.0)]
+    pub minutes: f64,
+    /// Held-out evaluation episodes of each best model.
+    #[arg(long, default_value_t = 100)]
+    pub episodes: u32,
+    /// Where the training runs go.
+    #[arg(long, default_value = "runs/bench")]
+    pub runs_dir: PathBuf,
+    /// Markdown file whose learning section is rewritten (created if missing).
+    #[arg(long, default_value = "docs/benchmarks.md")]
+    pub out: PathBuf,
+    /// Override a training setting of every run (as `fairgrasp train --set`).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+/// One point of the evaluation curve logged during training.
+#[derive(Clone, Copy, Debug)]
+struct CurvePoint {
+    steps: f64,
+    seconds: f64,
+    success: f64,
+}
+
+struct RunResult {
+    algo: String,
+    dir: PathBuf,
+    summary: TrainSummary,
+    curve: Vec<CurvePoint>,
+    held_out: EvalResult,
+}
+
+pub fn run(args: &LearningBenchArgs) -> Result<()> {
+    let mut jobs: Vec<(String, Option<PathBuf>)> = Vec::new();
+    for item in &args.runs {
+        let (algo, dir) = item
+            .split_once('=')
+            .with_context(|| format!("--run {item}: expected ALGO=RUN_DIR"))?;
+        jobs.push((algo.to_string(), Some(PathBuf::from(dir))));
+    }
+    let algos = if args.algos.is_empty() && jobs.is_empty() {
+        vec!["ppo".to_string(), "sac".to_string()]
+    } else {
+        args.algos.clone()
+    };
+    jobs.extend(algos.into_iter().map(|a| (a, None)));
+    let mut results = Vec::new();
+    for (algo, dir) in jobs {
+        let dir = match dir {
+            Some(dir) => dir,
+            None => train_child(&algo, args)?,
+        };
+        results.push(summarise(&algo, &dir, args.episodes)?);
+    }
+    let plot = args.out.with_file_name("img").join("learning_curves.svg");
+    draw_curves(&results, &plot)?;
+    let section = markdown(&results, args, &plot);
+    write_section(&args.out, &section)?;
+    println!("{section}");
+    println!("wrote {} and {}", args.out.display(), plot.display());
+    Ok(())
+}
+
+/// Trains `algo` with its default configuration in a child process; returns the run directory.
+fn train_child(algo: &str, args: &LearningBenchArgs) -> Result<PathBuf> {
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let dir = args.runs_dir.join(format!("{algo}_{stamp}"));
+    let exe = std::env::current_exe().context("cannot find the fairgrasp executable")?;
+    let mut command = std::process::Command::new(exe);
+    command.args(["train", "--algo", algo, "--quiet", "--run-dir"]);
+    command.arg(&dir);
+    command.args(["--set", &format!("max_seconds={}", args.minutes * 60.0)]);
+    for item in &args.overrides {
+        command.args(["--set", item]);
+    }
+    println!(
+        "training {algo} for at most {} min into {}",
+        args.minutes,
+        dir.display()
+    );
+    let status = command.status().context("cannot start training")?;
+    if !status.success() {
+        bail!("training {algo} failed ({status})");
+    }
+    Ok(dir)
+}
+
+fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
+    let path = dir.join("summary.json");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("{}: not a finished run", path.display()))?;
+    let summary: TrainSummary =
+        serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    let curve = eval_curve(&dir.join("progress.csv"))?;
+    let mut model = LoadedModel::load(&dir.join("best"))?;
+    let env = model.meta.env.clone();
+    let held_out = evaluate(
+        &mut |obs| model.act(obs),
+        &env,
+        episodes,
+        HELD_OUT_SEED_BASE,
+    )?;
+    Ok(RunResult {
+        algo: algo.to_string(),
+        dir: dir.to_path_buf(),
+        summary,
+        curve,
+        held_out,
+    })
+}
+
+/// The rows of progress.csv that hold an evaluation.
+fn eval_curve(path: &Path) -> Result<Vec<CurvePoint>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name);
+    let (Some(steps), Some(seconds), Some(success)) = (
+        column("time/total_timesteps"),
+        column("time/time_elapsed"),
+        column("eval/success_rate"),
+    ) else {
+        bail!("{}: no evaluation columns", path.display());
+    };
+    Ok(lines
+        .filter_map(|line| {
+            let cells: Vec<&str> = line.split(',').collect();
+            let get = |i: usize| cells.get(i)?.parse::<f64>().ok();
+            Some(CurvePoint {
+                steps: get(steps)?,
+                seconds: get(seconds)?,
+                success: get(success)?,
+            })
+        })
+        .collect())
+}
+
+/// The first evaluation at or above `threshold`.
+fn first_reaching(curve: &[CurvePoint], threshold: f64) -> Option<CurvePoint> {
+    curve
+        .iter()
+        .copied()
+        .find(|p| p.success >= threshold - 1e-9)
+}
+
+fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> String {
+    let mut s = String::new();
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let _ = writeln!(s, "## Learning: success rate against steps and wall time\n");
+    let _ = writeln!(
+        s,
+        "Generated by `fairgrasp bench learning{}` on {cpu} ({cores} cores available). Each \
+         algorithm trains with its default configuration (configs/ppo_grasp.toml, \
+         configs/sac_grasp.toml) for at most {} minutes; the curve is the evaluation during \
+         training (deterministic policy, seeds 1,000,000…); the last columns evaluate the best \
+         model on {} held-out episodes (seeds 2,000,000,000…), as `fairgrasp eval` does.\n",
+        args.runs
+            .iter()
+            .map(|r| format!(" --run {r}"))
+            .collect::<String>(),
+        args.minutes,
+        args.episodes
+    );
+    let _ = writeln!(
+        s,
+        "| algorithm | steps trained | wall time | env steps/s (updates included) | peak memory | 90 % reached at | 95 % reached at | held-out success | held-out mean return |"
+    );
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for r in results {
+        let at = |t: f64| {
+            first_reaching(&r.curve, t)
+                .map(|p| format!("{:.0}k steps, {:.1} min", p.steps / 1e3, p.seconds / 60.0))
+                .unwrap_or_else(|| "not reached".into())
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {:.0}k | {:.1} min | {:.0} | {} | {} | {} | {:.0} % ({} episodes) | {:.2} |",
+            r.algo.to_uppercase(),
+            r.summary.num_timesteps as f64 / 1e3,
+            r.summary.seconds / 60.0,
+            r.summary.fps,
+            r.summary
+                .peak_memory_mib
+                .map(|m| format!("{m:.0} MiB"))
+                .unwrap_or_else(|| "n/a".into()),
+            at(0.9),
+            at(0.95),
+            r.held_out.success_rate * 100.0,
+            r.held_out.episodes,
+            r.held_out.mean_return,
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n![success rate against steps and wall time](img/{})\n",
+        plot.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    );
+    for r in results {
+        let _ = writeln!(
+            s,
+            "<details><summary>{} evaluation curve ({})</summary>\n",
+            r.algo.to_uppercase(),
+            r.dir.display()
+        );
+        let _ = writeln!(s, "| env steps | wall time (min) | eval success |");
+        let _ = writeln!(s, "|---:|---:|---:|");
+        for p in &r.curve {
+            let _ = writeln!(
+                s,
+                "| {:.0} | {:.1} | {:.0} % |",
+                p.steps,
+                p.seconds / 60.0,
+                p.success * 100.0
+            );
+        }
+        let _ = writeln!(s, "\n</details>\n");
+    }
+    s
+}
+
+const BEGIN: &str = "<!-- learning:begin (generated by `fairgrasp bench learning`) -->";
+const END: &str = "<!-- learning:end -->";
+
+/// Replaces the learning section of `path` (or appends it), writing atomically.
+fn write_section(path: &Path, section: &str) -> Result<()> {
+    let old = std::fs::read_to_string(path).unwrap_or_else(|_| "# Benchmarks\n\n".into());
+    let block = format!("{BEGIN}\n{section}{END}\n");
+    let text = match (old.find(BEGIN), old.find(END)) {
+        (Some(b), Some(e)) if e > b => format!("{}{block}{}", &old[..b], &old[e + END.len()..]),
+        _ => format!("{}\n{block}", old.trim_end()),
+    };
+    fairgrasp_rl::save_util::write_atomic(path, text.as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Success rate against steps (left) and wall time (right), one line per algorithm.
+fn draw_curves(results: &[RunResult], path: &Path) -> Result<()> {
+    use plotters::prelude::*;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let root = SVGBackend::new(path, (1000, 380)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let panels = root.split_evenly((1, 2));
+    let max_steps = results
+        .iter()
+        .flat_map(|r| r.curve.iter().map(|p| p.steps))
+        .fold(1.0, f64::max);
+    let max_minutes = results
+        .iter()
+        .flat_map(|r| r.curve.iter().map(|p| p.seconds / 60.0))
+        .fold(1.0, f64::max);
+    let colours = [BLUE, RED, GREEN, MAGENTA];
+    for (panel, by_time) in panels.iter().zip([false, true]) {
+        let (x_max, x_label) = if by_time {
+            (max_minutes, "wall time (min)")
+        } else {
+            (max_steps / 1e6, "environment steps (millions)")
+        };
+        let mut chart = ChartBuilder::on(panel)
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(44)
+            .build_cartesian_2d(0.0..x_max, 0.0..100.0)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc("eval success (%)")
+            .draw()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        for (r, colour) in results.iter().zip(colours.iter().cycle()) {
+            let points = r.curve.iter().map(|p| {
+                let x = if by_time {
+                    p.seconds / 60.0
+                } else {
+                    p.steps / 1e6
+                };
+                (x, p.success * 100.0)
+            });
+            chart
+                .draw_series(LineSeries::new(points, colour.stroke_width(2)))
+                .map_err(|e| anyhow::anyhow!("{e}"))?
+                .label(r.algo.to_uppercase())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
+    Ok(())
+}
