@@ -136,6 +136,10 @@ const HALF_LN_2PI: f32 = 0.918_938_5;
 /// The actor's log standard deviation is squashed into this range (CleanRL's bounds).
 const LOG_STD_MIN: f64 = -5.0;
 const LOG_STD_MAX: f64 = 2.0;
+/// Output-layer gains (see [`Mlp::new`]): small for the actor, so the first policy is centred
+/// with σ = e^-1.5, as in CleanRL; ordinary for the critics.
+const ACTOR_OUTPUT_GAIN: f64 = 0.01;
+const CRITIC_OUTPUT_GAIN: f64 = 1.0;
 
 /// `log_std` squashed smoothly into `[LOG_STD_MIN, LOG_STD_MAX]` (a hard clamp would stop its
 /// gradient at the bounds).
@@ -175,7 +179,6 @@ impl Actor {
     fn new(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-        // Small output weights: the first policy is centred with σ = e^-1.5, as in CleanRL.
         let net = Mlp::new(
             &vb.pp("actor"),
             obs_dim,
@@ -205,9 +208,6 @@ impl Actor {
         squashed_gaussian(&mean, &log_std, eps)
     }
 }
-
-const ACTOR_OUTPUT_GAIN: f64 = 0.01;
-const CRITIC_OUTPUT_GAIN: f64 = 1.0;
 
 /// Twin Q networks on `[observation, action]` (Fujimoto et al. 2018: the minimum of two
 /// critics curbs the overestimation a single one accumulates).
@@ -285,18 +285,16 @@ impl Networks {
         let target_pairs = {
             let online = critic.varmap.data().lock().expect("varmap lock");
             let target = critic_target.varmap.data().lock().expect("varmap lock");
-            let mut pairs: Vec<(String, Var, Var)> = online
+            online
                 .iter()
                 .map(|(name, v)| {
                     let target_name = format!("critic_target.{}", &name["critic.".len()..]);
                     let t = target.get(&target_name).cloned().ok_or_else(|| {
                         RlError::Other(format!("target critic lacks `{target_name}`"))
                     })?;
-                    Ok((name.clone(), v.clone(), t))
+                    Ok((v.clone(), t))
                 })
-                .collect::<Result<_>>()?;
-            pairs.sort_by(|a, b| a.0.cmp(&b.0));
-            pairs.into_iter().map(|(_, o, t)| (o, t)).collect()
+                .collect::<Result<_>>()?
         };
         let nets = Self {
             actor,
@@ -662,7 +660,7 @@ impl Algorithm for Sac {
     }
 
     fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
-        if obs.len() % self.obs_dim != 0 {
+        if !obs.len().is_multiple_of(self.obs_dim) {
             return Err(RlError::Other(format!(
                 "{} observation values are not rows of {}",
                 obs.len(),
@@ -761,8 +759,8 @@ impl Algorithm for Sac {
         let rng = rng_from_state(state, "sac.")?;
         let grad_accumulator = state_scalar(state, "sac.grad_accumulator")?;
         let n_updates = state_scalar(state, "sac.n_updates")? as u64;
-        // A state saved without its replay buffer resumes with an empty one (SB3 too), unless
-        // this run asks for the buffer to be kept.
+        // A run that keeps its buffer in checkpoints needs it back; otherwise a state without
+        // one resumes with the buffer as it is (empty in a fresh learner, as in SB3).
         if self.config.save_replay_buffer || state.contains_key("sac.replay.rewards") {
             self.buffer
                 .load_state(state, "sac.replay.")
@@ -772,7 +770,7 @@ impl Algorithm for Sac {
         self.critic_opt = critic_opt;
         self.alpha_opt = alpha_opt;
         self.rng = rng;
-        let _ = grad_accumulator;
+        self.grad_accumulator = grad_accumulator;
         self.n_updates = n_updates;
         Ok(())
     }
@@ -1211,30 +1209,36 @@ mod tests {
         assert_eq!(Pendulum::new().action_space().high, [2.0]);
     }
 
-    /// Gradient steps per second at the grasping task's sizes (run with `--ignored` in release).
+    /// Gradient steps per second at the grasping task's sizes and at the Pendulum test's (run
+    /// with `--ignored` in release; `RAYON_NUM_THREADS` sets candle's threads).
     #[test]
     #[ignore]
     fn gradient_step_throughput() {
-        let (obs_dim, act_dim) = (40, 5);
-        let mut sac = Sac::new(SacConfig::default(), obs_dim, act_dim, 1, 0).unwrap();
-        let mut rng = ChaCha8Rng::seed_from_u64(0);
-        for _ in 0..10_000 {
-            let obs: Vec<f32> = (0..obs_dim).map(|_| standard_normal(&mut rng)).collect();
-            let action: Vec<f32> = (0..act_dim).map(|_| rng.random_range(-1.0..1.0)).collect();
-            sac.buffer.push(&obs, &action, rng.random(), &obs, false);
+        for (obs_dim, act_dim, net_arch) in [(40, 5, vec![256, 256]), (3, 1, vec![64, 64])] {
+            let config = SacConfig {
+                net_arch: net_arch.clone(),
+                ..SacConfig::default()
+            };
+            let mut sac = Sac::new(config, obs_dim, act_dim, 1, 0).unwrap();
+            let mut rng = ChaCha8Rng::seed_from_u64(0);
+            for _ in 0..10_000 {
+                let obs: Vec<f32> = (0..obs_dim).map(|_| standard_normal(&mut rng)).collect();
+                let action: Vec<f32> = (0..act_dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+                sac.buffer.push(&obs, &action, rng.random(), &obs, false);
+            }
+            for _ in 0..10 {
+                sac.gradient_step().unwrap();
+            }
+            let n = 200;
+            let start = std::time::Instant::now();
+            for _ in 0..n {
+                sac.gradient_step().unwrap();
+            }
+            let secs = start.elapsed().as_secs_f64();
+            eprintln!(
+                "batch 256, {net_arch:?} nets, {obs_dim} → {act_dim}: {:.1} gradient steps/s",
+                n as f64 / secs
+            );
         }
-        for _ in 0..10 {
-            sac.gradient_step().unwrap();
-        }
-        let n = 200;
-        let start = std::time::Instant::now();
-        for _ in 0..n {
-            sac.gradient_step().unwrap();
-        }
-        let secs = start.elapsed().as_secs_f64();
-        eprintln!(
-            "{n} gradient steps (batch 256, [256, 256], 40 → 5) in {secs:.2} s: {:.1} steps/s",
-            n as f64 / secs
-        );
     }
 }
