@@ -191,7 +191,9 @@ impl LoadedModel {
         let agent = match meta.algo.as_str() {
             "ppo" => {
                 let config = meta.ppo.clone().ok_or_else(|| missing("ppo"))?;
-                let policy = ActorCritic::new(meta.obs_dim, meta.act_dim, &config)?;
+                // The weights come from the file; the generator only fills them first.
+                let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0);
+                let policy = ActorCritic::new(meta.obs_dim, meta.act_dim, &config, &mut rng)?;
                 load_varmap(&policy.varmap, &weights).map_err(context)?;
                 Agent::Ppo(policy)
             }

@@ -6,6 +6,7 @@
 
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{Init, Linear, Module, VarBuilder, VarMap};
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
@@ -22,29 +23,37 @@ pub enum Activation {
 pub struct Mlp {
     layers: Vec<Linear>,
     activation: Activation,
+    /// Full name and initial standard deviation of each layer's weight matrix.
+    weight_init: Vec<(String, f64)>,
 }
 
-/// A linear layer with weights drawn from N(0, (gain / √fan_in)²) and zero bias.
+/// A draw from N(0, 1) (Box–Muller).
+pub fn standard_normal(rng: &mut impl Rng) -> f32 {
+    let u1: f32 = rng.random::<f32>().max(1e-12);
+    let u2: f32 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
+}
+
+/// A linear layer with zero weights and bias; [`Mlp::init_weights`] draws the weights.
 fn linear(
     vb: &VarBuilder,
     name: &str,
     fan_in: usize,
     fan_out: usize,
-    gain: f64,
 ) -> candle_core::Result<Linear> {
-    let stdev = gain / (fan_in as f64).sqrt();
     let weight = vb.get_with_hints(
         (fan_out, fan_in),
         &format!("{name}.weight"),
-        Init::Randn { mean: 0.0, stdev },
+        Init::Const(0.0),
     )?;
     let bias = vb.get_with_hints(fan_out, &format!("{name}.bias"), Init::Const(0.0))?;
     Ok(Linear::new(weight, Some(bias)))
 }
 
 impl Mlp {
-    /// `input → hidden… → output`; the output layer's weights are scaled by `output_gain`
-    /// (small for policy means, so the first actions are near zero, as CleanRL does).
+    /// `input → hidden… → output`, weights zero until [`Self::init_weights`]. Hidden layers are
+    /// initialised with gain √2, the output layer with `output_gain` (small for policy means, so
+    /// the first actions are near zero, as CleanRL does).
     pub fn new(
         vb: &VarBuilder,
         input: usize,
@@ -54,25 +63,49 @@ impl Mlp {
         output_gain: f64,
     ) -> candle_core::Result<Self> {
         let mut layers = Vec::new();
+        let mut weight_init = Vec::new();
         let mut fan_in = input;
-        for (i, &h) in hidden.iter().enumerate() {
-            layers.push(linear(
-                vb,
-                &format!("l{i}"),
-                fan_in,
-                h,
-                std::f64::consts::SQRT_2,
-            )?);
-            fan_in = h;
+        let sizes = hidden.iter().copied().chain([output]);
+        for (i, fan_out) in sizes.enumerate() {
+            let name = format!("l{i}");
+            layers.push(linear(vb, &name, fan_in, fan_out)?);
+            let gain = if i == hidden.len() {
+                output_gain
+            } else {
+                std::f64::consts::SQRT_2
+            };
+            let prefix = vb.prefix();
+            let full = if prefix.is_empty() {
+                format!("{name}.weight")
+            } else {
+                format!("{prefix}.{name}.weight")
+            };
+            weight_init.push((full, gain / (fan_in as f64).sqrt()));
+            fan_in = fan_out;
         }
-        layers.push(linear(
-            vb,
-            &format!("l{}", hidden.len()),
-            fan_in,
-            output,
-            output_gain,
-        )?);
-        Ok(Self { layers, activation })
+        Ok(Self {
+            layers,
+            activation,
+            weight_init,
+        })
+    }
+
+    /// Draws the weights from N(0, (gain / √fan_in)²) with `rng`, layer by layer, so a seed
+    /// fixes the network. (candle's own initialisers draw from an unseeded thread-local
+    /// generator.) `varmap` is the map the network was built in.
+    pub fn init_weights(&self, varmap: &VarMap, rng: &mut impl Rng) -> candle_core::Result<()> {
+        let data = varmap.data().lock().expect("varmap lock");
+        for (name, std) in &self.weight_init {
+            let var = data
+                .get(name)
+                .ok_or_else(|| candle_core::Error::Msg(format!("no variable `{name}`")))?;
+            let (fan_out, fan_in) = var.as_tensor().dims2()?;
+            let values: Vec<f32> = (0..fan_out * fan_in)
+                .map(|_| *std as f32 * standard_normal(rng))
+                .collect();
+            var.set(&Tensor::from_vec(values, (fan_out, fan_in), var.device())?)?;
+        }
+        Ok(())
     }
 
     pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
@@ -223,6 +256,8 @@ mod tests {
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
         let net = Mlp::new(&vb, 2, &[16], 1, Activation::Tanh, 1.0).unwrap();
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0);
+        net.init_weights(&varmap, &mut rng).unwrap();
         let mut adam = Adam::new(&varmap, 1e-2).unwrap();
         let x = Tensor::new(&[[0.1f32, 0.2], [0.5, -0.3], [-0.4, 0.8], [0.9, 0.1]], &dev).unwrap();
         let y = Tensor::new(&[[0.5f32], [-0.1], [1.2], [1.1]], &dev).unwrap(); // y = x0 + 2 x1 + 0.0.

@@ -10,6 +10,7 @@ use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
 };
 use crate::buffers::RolloutBuffer;
+pub use crate::nn::standard_normal;
 use crate::nn::{Activation, Adam, Mlp};
 use candle_core::{D, DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
@@ -123,7 +124,13 @@ pub struct PolicyOutput {
 }
 
 impl ActorCritic {
-    pub fn new(obs_dim: usize, act_dim: usize, config: &PpoConfig) -> Result<Self> {
+    /// The networks, with weights drawn from `rng` (see [`Mlp::init_weights`]).
+    pub fn new(
+        obs_dim: usize,
+        act_dim: usize,
+        config: &PpoConfig,
+        rng: &mut impl Rng,
+    ) -> Result<Self> {
         let device = Device::Cpu;
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &device);
@@ -155,6 +162,8 @@ impl ActorCritic {
             .get("log_std")
             .cloned()
             .ok_or_else(|| RlError::Other("log_std parameter missing".into()))?;
+        policy.init_weights(&varmap, rng)?;
+        value.init_weights(&varmap, rng)?;
         Ok(Self {
             varmap,
             policy,
@@ -227,13 +236,6 @@ impl ActorCritic {
     }
 }
 
-/// A draw from N(0, 1) (Box–Muller).
-pub fn standard_normal(rng: &mut impl Rng) -> f32 {
-    let u1: f32 = rng.random::<f32>().max(1e-12);
-    let u2: f32 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
-}
-
 /// Statistics of one PPO update (SB3's `train/*` scalars).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct UpdateStats {
@@ -272,11 +274,12 @@ impl Ppo {
         seed: u64,
     ) -> Result<Self> {
         validate(&config, n_envs)?;
-        let policy = ActorCritic::new(obs_dim, act_dim, &config)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let policy = ActorCritic::new(obs_dim, act_dim, &config, &mut rng)?;
         let optimizer = Adam::new(&policy.varmap, config.learning_rate)?;
         Ok(Self {
             buffer: RolloutBuffer::new(config.n_steps, n_envs, obs_dim, act_dim),
-            rng: ChaCha8Rng::seed_from_u64(seed),
+            rng,
             config,
             policy,
             optimizer,

@@ -18,8 +18,9 @@ use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
 };
 use crate::buffers::{ReplayBuffer, ReplaySample};
+use crate::nn::standard_normal;
 use crate::nn::{Activation, Adam, Mlp};
-use crate::ppo::{Result, RlError, standard_normal};
+use crate::ppo::{Result, RlError};
 use candle_core::{D, DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use fairgrasp_env::{VecStep, VectorEnv};
@@ -337,32 +338,11 @@ impl Networks {
         Ok(())
     }
 
-    /// Redraws the actor's and critics' weights from `rng` with [`Mlp::new`]'s scheme
-    /// (`N(0, (gain/√fan_in)²)`: √2 for hidden layers, the output gain for the last), because
-    /// candle's CPU initialisers draw from an unseeded thread RNG and a seed should fix the run.
-    fn reseed(&self, config: &SacConfig, rng: &mut ChaCha8Rng) -> Result<()> {
-        let layers = config.net_arch.len() + 1;
-        let mlps = [
-            (&self.actor.varmap, "actor", ACTOR_OUTPUT_GAIN),
-            (&self.critic.varmap, "critic.qf1", CRITIC_OUTPUT_GAIN),
-            (&self.critic.varmap, "critic.qf2", CRITIC_OUTPUT_GAIN),
-        ];
-        for (varmap, prefix, output_gain) in mlps {
-            for i in 0..layers {
-                let w = var(varmap, &format!("{prefix}.l{i}.weight"))?;
-                let (fan_out, fan_in) = w.as_tensor().dims2()?;
-                let gain = if i + 1 == layers {
-                    output_gain
-                } else {
-                    std::f64::consts::SQRT_2
-                };
-                let std = (gain / (fan_in as f64).sqrt()) as f32;
-                let values: Vec<f32> = (0..fan_out * fan_in)
-                    .map(|_| std * standard_normal(rng))
-                    .collect();
-                w.set(&Tensor::from_vec(values, (fan_out, fan_in), &Device::Cpu)?)?;
-            }
-        }
+    /// Draws the actor's and critics' weights from `rng` and copies the critics to the targets.
+    fn init_weights(&self, rng: &mut ChaCha8Rng) -> Result<()> {
+        self.actor.net.init_weights(&self.actor.varmap, rng)?;
+        self.critic.qf1.init_weights(&self.critic.varmap, rng)?;
+        self.critic.qf2.init_weights(&self.critic.varmap, rng)?;
         self.copy_critic_to_target()
     }
 }
@@ -426,7 +406,7 @@ impl Sac {
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let nets = Networks::new(obs_dim, act_dim, &config)?;
-        nets.reseed(&config, &mut rng)?;
+        nets.init_weights(&mut rng)?;
         let lr = config.learning_rate;
         Ok(Self {
             actor_opt: Adam::new(&nets.actor.varmap, lr)?,

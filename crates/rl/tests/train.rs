@@ -215,3 +215,23 @@ fn saved_models_load_and_corrupt_or_mismatched_ones_fail_clearly() {
         .to_string();
     assert!(err.contains("no model here"), "{err}");
 }
+
+#[test]
+fn the_same_seed_trains_the_same_weights() {
+    let weights = |seed: u64| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut config = tiny_config(512);
+        config.seed = seed;
+        train(&config, dir.path(), |_| {}).unwrap();
+        let tensors = load_tensors(&dir.path().join("final/model.safetensors")).unwrap();
+        let mut names: Vec<&String> = tensors.keys().collect();
+        names.sort();
+        names
+            .into_iter()
+            .flat_map(|n| tensors[n].flatten_all().unwrap().to_vec1::<f32>().unwrap())
+            .collect::<Vec<f32>>()
+    };
+    let (a, b) = (weights(7), weights(7));
+    assert_eq!(a, b, "two runs with seed 7 differ");
+    assert_ne!(a, weights(8), "seeds 7 and 8 trained the same weights");
+}
