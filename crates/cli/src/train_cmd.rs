@@ -45,11 +45,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         overrides.push(format!("total_timesteps={n}"));
     }
     if let Some(dir) = &args.resume {
-        let text = std::fs::read_to_string(dir.join("config.toml"))
-            .with_context(|| format!("cannot resume {}: no config.toml", dir.display()))?;
-        let config = TrainConfig::from_toml_str(&text, &overrides)
-            .with_context(|| format!("invalid settings for {}", dir.display()))?;
-        let mut reporter = Reporter::new(&config, args.quiet);
+        let mut reporter = Reporter::new(args.quiet);
         let summary = resume(dir, &overrides, |p| reporter.update(p))
             .with_context(|| format!("resuming {}", dir.display()))?;
         reporter.finish();
@@ -93,7 +89,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         config.seed,
         run_dir.display()
     );
-    let mut reporter = Reporter::new(&config, args.quiet);
+    let mut reporter = Reporter::new(args.quiet);
     let summary = train(&config, &run_dir, |p| reporter.update(p))?;
     reporter.finish();
     print_summary(&summary)
@@ -124,9 +120,10 @@ struct Reporter {
 }
 
 impl Reporter {
-    fn new(config: &TrainConfig, quiet: bool) -> Self {
+    fn new(quiet: bool) -> Self {
+        // The bar's length comes with the first progress report (the run's total steps).
         let bar = (!quiet).then(|| {
-            let bar = ProgressBar::new(config.total_timesteps);
+            let bar = ProgressBar::new(0);
             bar.set_style(
                 ProgressStyle::with_template(
                     "{elapsed_precise} [{bar:30}] {pos}/{len} steps, ETA {eta} {msg}",
@@ -159,6 +156,7 @@ impl Reporter {
         }
         match &self.bar {
             Some(bar) => {
+                bar.set_length(p.total_timesteps);
                 bar.set_position(p.num_timesteps.min(p.total_timesteps));
                 bar.set_message(msg);
             }

@@ -309,13 +309,16 @@ pub fn resume(
         ))
     })?;
     let config = TrainConfig::from_toml_str(&text, overrides)?;
-    let checkpoint = latest_checkpoint(run_dir)?.ok_or_else(|| {
-        RlError::Model(format!(
-            "cannot resume {}: no complete checkpoint in {}",
-            run_dir.display(),
-            run_dir.join("checkpoints").display()
-        ))
-    })?;
+    let checkpoint = checkpoints(run_dir)
+        .pop()
+        .map(|(_, path)| path)
+        .ok_or_else(|| {
+            RlError::Model(format!(
+                "cannot resume {}: no complete checkpoint in {}",
+                run_dir.display(),
+                run_dir.join("checkpoints").display()
+            ))
+        })?;
     if !overrides.is_empty() {
         let effective = toml::to_string(&config).map_err(|e| RlError::Other(e.to_string()))?;
         write_atomic(&config_path, effective.as_bytes())
@@ -339,10 +342,6 @@ pub fn checkpoints(run_dir: &Path) -> Vec<(u64, PathBuf)> {
         .collect();
     found.sort();
     found
-}
-
-fn latest_checkpoint(run_dir: &Path) -> Result<Option<PathBuf>> {
-    Ok(checkpoints(run_dir).pop().map(|(_, path)| path))
 }
 
 fn dispatch(
