@@ -1,0 +1,361 @@
+"""Writes docs/benchmarks.md from the results `bench/run` collected: the machine, the commands and
+the four comparisons of fairgrasp against the PyBullet + Stable-Baselines3 reference, each as a
+ratio of ours to the reference. The learning section (`fairgrasp bench learning`) is kept as it is.
+
+    python report.py --results runs/bench/reference_TIMESTAMP --out docs/benchmarks.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib.metadata
+import json
+import os
+import platform
+import re
+import statistics
+import subprocess
+import tempfile
+from pathlib import Path
+
+LEARNING_BEGIN = "<!-- learning:begin"
+LEARNING_END = "<!-- learning:end -->"
+
+
+def read_jsonl(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def median(rows: list[dict], key: str) -> float:
+    return statistics.median(r[key] for r in rows)
+
+
+def spread(rows: list[dict], key: str) -> str:
+    """` (min–max)` over the repeats, or nothing for a single run."""
+    values = [r[key] for r in rows]
+    return f" ({min(values):,.0f}–{max(values):,.0f})" if len(values) > 1 else ""
+
+
+def command_output(args: list[str]) -> str:
+    try:
+        return subprocess.run(args, capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    packages = ", ".join(
+        f"{name} {importlib.metadata.version(name)}"
+        for name in ["pybullet", "gymnasium", "stable-baselines3", "torch", "numpy"]
+    )
+    return (
+        f"{cpu}, {os.cpu_count()} cores available, {platform.system()} {platform.release()}; "
+        f"{command_output(['rustc', '--version'])}; Python {platform.python_version()} with "
+        f"{packages}; fairgrasp commit {command_output(['git', 'rev-parse', '--short', 'HEAD'])}"
+    )
+
+
+def ratio(ours: float, reference: float) -> str:
+    return f"**{ours / reference:.1f}×**" if reference > 0 else "n/a"
+
+
+def pct(x: float | None) -> str:
+    return "—" if x is None else f"{x:.0%}"
+
+
+def ours_eval_curve(run_dir: Path) -> list[dict]:
+    """Evaluation rows of a fairgrasp run's progress.csv."""
+    curve = []
+    with open(run_dir / "progress.csv") as f:
+        for row in csv.DictReader(f):
+            if row.get("eval/success_rate"):
+                curve.append(
+                    {
+                        "steps": int(float(row["time/total_timesteps"])),
+                        "seconds": float(row["time/time_elapsed"]),
+                        "success": float(row["eval/success_rate"]),
+                    }
+                )
+    return curve
+
+
+def first_reaching(curve: list[dict], level: float) -> str:
+    for point in curve:
+        if point["success"] >= level:
+            return f"{point['seconds'] / 60:.1f} min ({point['steps'] / 1000:.0f}k steps)"
+    return "not reached"
+
+
+def plot(ours: list[dict], reference: list[dict], budget_min: float, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("svg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams["svg.hashsalt"] = "fairgrasp"  # stable ids: the file changes only with data
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for curve, label, style in [
+        (ours, "fairgrasp (default training)", "o-"),
+        (reference, "PyBullet + SB3 PPO (design settings)", "s-"),
+    ]:
+        t = [0.0] + [p["seconds"] / 60 for p in curve]
+        n = [0.0] + [p["steps"] / 1000 for p in curve]
+        s = [0.0] + [100 * p["success"] for p in curve]
+        axes[0].plot(t, s, style, label=label, markersize=4)
+        axes[1].plot(n, s, style, label=label, markersize=4)
+    axes[0].set_xlabel("wall-clock time (min)")
+    axes[0].set_xlim(0, budget_min)
+    axes[1].set_xlabel("environment steps (thousands)")
+    for ax in axes:
+        ax.set_ylabel("evaluation success (%)")
+        ax.set_ylim(-2, 102)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="center right", fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, format="svg", metadata={"Date": None})
+    plt.close(fig)
+
+
+def reference_section(results: Path, image: Path, out: Path) -> str:
+    meta = json.loads((results / "meta.json").read_text())
+    check = json.loads((results / "check_reference.json").read_text())
+    scripted_ours = (results / "scripted_ours.txt").read_text().strip()
+    m = re.search(r"(\d+)/(\d+) successes", scripted_ours)
+    ours_scripted = f"{m.group(1)}/{m.group(2)}" if m else scripted_ours
+    m = re.search(r"mean length of successful episodes ([\d.]+)", scripted_ours)
+    ours_scripted_steps = m.group(1) if m else "?"
+
+    phys_o = read_jsonl(results / "physics_ours.jsonl")
+    phys_r = read_jsonl(results / "physics_reference.jsonl")
+    env_o = read_jsonl(results / "env_ours.jsonl")
+    env_r = read_jsonl(results / "env_reference.jsonl")
+    tp_o = read_jsonl(results / "throughput_ours.jsonl")
+    tp_r = read_jsonl(results / "throughput_reference.jsonl")
+    tts_ours_summary = json.loads((results / "tts_ours" / "summary.json").read_text())
+    tts_ours_eval = json.loads((results / "tts_ours_eval.json").read_text())
+    tts_ref = json.loads((results / "tts_reference.json").read_text())
+    curve_o = ours_eval_curve(results / "tts_ours")
+    curve_r = tts_ref["eval_curve"]
+    budget_min = meta["budget_minutes"]
+    plot(curve_o, curve_r, budget_min, image)
+    repeats = meta["repeats"]
+
+    lines = []
+    w = lines.append
+    w("## fairgrasp against PyBullet + Stable-Baselines3")
+    w("")
+    w(
+        f"Generated by `{meta['command']}` on {meta['date']}, in {meta['wall_minutes']:.0f} min, "
+        f"on {machine()}."
+    )
+    w("")
+    w(
+        "The reference (`bench/reference/`) is the design document's environment written in "
+        "PyBullet (p.DIRECT): the bundled FR5 URDF with the gripper on its flange, the same "
+        "table, cube, placement, `seed23` observation, joint-delta actions (±0.1 rad), hybrid "
+        "reward, success rule, 240 Hz physics and 30 Hz control, all read from "
+        "`configs/env.toml`. Ratios are ours ÷ reference; above 1 means fairgrasp is faster. "
+        f"Short measurements are repeated {repeats} times, ours and the reference interleaved, "
+        "and the median is shown (range in brackets)."
+    )
+    w("")
+    w("### 0. Both environments work")
+    w("")
+    w("| check | fairgrasp | reference |")
+    w("|---|---|---|")
+    gym_warn = "; ".join(check["gymnasium_warnings"]) or "no warnings"
+    sb3_warn = "; ".join(check["sb3_warnings"]) or "no warnings"
+    w(
+        f"| environment checker | `fairgrasp env check` (in the test suite) | gymnasium "
+        f"`check_env`: {check['gymnasium_check_env']} ({gym_warn}); SB3 `check_env`: "
+        f"{check['sb3_check_env']} ({sb3_warn}) |"
+    )
+    w(
+        f"| scripted pick through `step()` (joint deltas ±0.1 rad) | {ours_scripted} episodes, "
+        f"{ours_scripted_steps} steps each | {check['scripted_successes']}/"
+        f"{check['scripted_episodes']} episodes, {check['scripted_mean_steps']:.1f} steps each |"
+    )
+    w("")
+
+    w("### 1. Physics steps per second, same scene, one thread")
+    w("")
+    w("| state (240 Hz) | fairgrasp (rapier) | PyBullet | ratio |")
+    w("|---|---:|---:|---:|")
+    for key, label in [
+        ("steps_per_s_idle", "arm holding, cube on the table"),
+        ("steps_per_s_grasping", "cube grasped and lifted"),
+        ("resets_per_s", "resets/s (new placement, cube settling; ours also checks with 2 IK solves that the grasp is reachable)"),
+    ]:
+        o, r = median(phys_o, key), median(phys_r, key)
+        w(
+            f"| {label} | {o:,.0f}{spread(phys_o, key)} | {r:,.0f}{spread(phys_r, key)} "
+            f"| {ratio(o, r)} |"
+        )
+    w("")
+
+    w("### 2. Environment steps per second, random actions")
+    w("")
+    n = env_o[0]["num_envs"]
+    procs = env_r[0]["processes"]
+    w("| setting | fairgrasp | reference | ratio |")
+    w("|---|---:|---:|---:|")
+    o, r = median(env_o, "env_steps_per_s_single"), median(env_r, "env_steps_per_s_single")
+    w(
+        f"| one env, one thread | {o:,.0f}{spread(env_o, 'env_steps_per_s_single')} | "
+        f"{r:,.0f}{spread(env_r, 'env_steps_per_s_single')} | {ratio(o, r)} |"
+    )
+    o = median(env_o, "env_steps_per_s_vec_2_threads")
+    r = median(env_r, "env_steps_per_s_subproc")
+    w(
+        f"| {n} envs on 2 cores: our `VecEnv` on 2 threads vs SB3 `SubprocVecEnv` | {o:,.0f}"
+        f"{spread(env_o, 'env_steps_per_s_vec_2_threads')} | {r:,.0f}"
+        f"{spread(env_r, 'env_steps_per_s_subproc')} | {ratio(o, r)} |"
+    )
+    r2 = median(env_r, "env_steps_per_s_free_processes")
+    w(
+        f"| upper bound for Python: {procs} independent processes, no lockstep | | {r2:,.0f}"
+        f"{spread(env_r, 'env_steps_per_s_free_processes')} | {ratio(o, r2)} |"
+    )
+    w("")
+    w(
+        "An env step is 8 physics steps plus the observation, reward and success check; "
+        "episodes end at the 100-step limit and reset. Our vectorised figure is "
+        f"{median(env_o, 'env_steps_per_s_vec_1_thread'):,.0f} on one thread."
+    )
+    w("")
+
+    w("### 3. Training throughput, the design's PPO settings")
+    w("")
+    steps = tp_o[0]["num_timesteps"]
+    w(
+        f"PPO with lr 3e-4, n_steps 2048, batch 256, 10 epochs, γ 0.99, λ 0.95, clip 0.2, "
+        f"ent_coef 0.01, [64, 64] tanh networks, 4 envs, {steps:,} steps ({steps // 8192} "
+        "rollouts and their updates), no evaluation: `fairgrasp train --config configs/ppo_seed.toml` against "
+        "SB3 `PPO('MlpPolicy')` on 4 `SubprocVecEnv` workers."
+    )
+    w("")
+    w("| | fairgrasp | SB3 + PyBullet | ratio |")
+    w("|---|---:|---:|---:|")
+    o, r = median(tp_o, "fps"), median(tp_r, "fps")
+    w(
+        f"| env steps/s, updates included | {o:,.0f}{spread(tp_o, 'fps')} | {r:,.0f}"
+        f"{spread(tp_r, 'fps')} | {ratio(o, r)} |"
+    )
+    o, r = median(tp_o, "peak_memory_mib"), median(tp_r, "peak_memory_mib")
+    w(
+        f"| peak memory (MiB; reference: main process + largest worker) | {o:,.0f} | {r:,.0f} | "
+        f"{r / o:.0f}× less |"
+    )
+    w("")
+
+    w(f"### 4. Time to success, {budget_min:g}-minute wall-clock budget each")
+    w("")
+    w(
+        "Each side trains as its users would: fairgrasp's default training (`fairgrasp train`, "
+        "configs/ppo_grasp.toml, stopping early once 49 of 50 evaluation episodes succeed) and "
+        "SB3 PPO with the design's settings on the reference. Both evaluate every 50k env steps "
+        "on 50 episodes (seeds 1,000,000…, deterministic policy, inside the budget) and keep "
+        "their best model; after the budget that model plays 100 held-out episodes (seeds "
+        "2,000,000,000…)."
+    )
+    w("")
+    held_ref = tts_ref.get("held_out", {})
+    best_o = max((p["success"] for p in curve_o), default=0.0)
+    best_r = max((p["success"] for p in curve_r), default=0.0)
+    w("| | fairgrasp | SB3 + PyBullet |")
+    w("|---|---:|---:|")
+    w(
+        f"| env steps trained | {tts_ours_summary['num_timesteps']:,} | {tts_ref['steps']:,} |"
+    )
+    w(
+        f"| wall time used | {tts_ours_summary['seconds'] / 60:.1f} min | "
+        f"{tts_ref['seconds'] / 60:.1f} min |"
+    )
+    w(f"| best evaluation success | {pct(best_o)} | {pct(best_r)} |")
+    w(
+        f"| 90 % evaluation success reached at | {first_reaching(curve_o, 0.9)} | "
+        f"{first_reaching(curve_r, 0.9)} |"
+    )
+    w(
+        f"| held-out success of the best model | {pct(tts_ours_eval['success_rate'])} "
+        f"({tts_ours_eval['episodes']} episodes) | {pct(held_ref.get('success'))} "
+        f"({held_ref.get('episodes', 0)} episodes) |"
+    )
+    w(
+        f"| held-out mean return | {tts_ours_eval['mean_return']:.2f} (staged reward) | "
+        f"{held_ref.get('mean_return', float('nan')):.2f} (hybrid reward) |"
+    )
+    w("")
+    w(f"![evaluation success against wall time and steps]({image.relative_to(out.parent)})")
+    w("")
+    for name, curve in [("fairgrasp", curve_o), ("SB3 + PyBullet", curve_r)]:
+        w(f"<details><summary>{name} evaluation curve</summary>")
+        w("")
+        w("| env steps | wall time (min) | eval success |")
+        w("|---:|---:|---:|")
+        for p in curve:
+            w(f"| {p['steps']} | {p['seconds'] / 60:.1f} | {p['success']:.0%} |")
+        w("")
+        w("</details>")
+        w("")
+
+    w("### Commands")
+    w("")
+    w("```")
+    w(meta["command"])
+    w("```")
+    w("")
+    w("runs, in this order (results and logs in the run's `runs/bench/reference_*/` directory):")
+    w("")
+    for c in meta["steps"]:
+        w(f"- `{c}`")
+    w("")
+    return "\n".join(lines)
+
+
+HEADER = """# Benchmarks
+
+Every figure below is written by a command; re-run it to regenerate its section on your machine.
+Compare ratios measured in the same run: absolute figures move with the host's load.
+"""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", required=True, type=Path)
+    parser.add_argument("--out", default="docs/benchmarks.md", type=Path)
+    args = parser.parse_args()
+    out = args.out
+    image = out.parent / "img" / "reference_time_to_success.svg"
+    section = reference_section(args.results, image, out)
+
+    learning = ""
+    if out.exists():
+        text = out.read_text()
+        if LEARNING_BEGIN in text and LEARNING_END in text:
+            start = text.index(LEARNING_BEGIN)
+            learning = text[start : text.index(LEARNING_END) + len(LEARNING_END)]
+    parts = [HEADER, "<!-- reference:begin (generated by `bench/run`) -->", section,
+             "<!-- reference:end -->"]
+    if learning:
+        parts += ["", learning]
+    body = "\n".join(parts) + "\n"
+    # Atomic: a failed report never leaves a half-written file.
+    with tempfile.NamedTemporaryFile("w", dir=out.parent, delete=False, suffix=".tmp") as f:
+        f.write(body)
+    os.replace(f.name, out)
+    print(f"wrote {out} and {image}")
+
+
+if __name__ == "__main__":
+    main()
