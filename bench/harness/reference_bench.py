@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 import warnings
@@ -222,6 +221,7 @@ def evaluate(model, episodes: int, seed_base: int) -> tuple[float, float]:
 def cmd_train(args) -> None:
     """SB3 PPO with the design document's settings on SubprocVecEnv: throughput, and (with
     `--eval-freq`) the evaluation success against steps and wall time within a budget."""
+    import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
@@ -289,7 +289,7 @@ def cmd_train(args) -> None:
         "seconds": wall,
         "fps": model.num_timesteps / wall,
         "n_envs": args.n_envs,
-        "torch_threads": __import__("torch").get_num_threads(),
+        "torch_threads": torch.get_num_threads(),
         "eval_curve": budget.curve,
         "peak_memory_mib": peak_memory_mib(),
     }
@@ -305,7 +305,7 @@ def cmd_train(args) -> None:
 
 
 def peak_memory_mib() -> float | None:
-    """Peak resident memory of this process and its finished children (MiB)."""
+    """Peak resident memory of this process plus that of its largest finished child (MiB)."""
     try:
         import resource
 
@@ -317,7 +317,6 @@ def peak_memory_mib() -> float | None:
 
 
 def main() -> None:
-    os.environ.setdefault("PYTHONWARNINGS", "ignore")
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("check", help=cmd_check.__doc__)
