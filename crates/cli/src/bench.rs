@@ -99,7 +99,7 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
 
     // Cube squeezed between the pads and lifted: the contact-heavy state of the task.
     scene.reset(0)?;
-    grasp_and_lift(&mut scene, &PickScript::default(), &mut |s| {
+    grasp_and_lift(&mut scene, 0, &PickScript::default(), &mut |s| {
         s.step_control()
     })?;
     let held = scene.snapshot();

@@ -10,7 +10,7 @@ use crate::spaces::BoxSpace;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::pick::{GraspStatus, SuccessRule, SuccessTracker};
 use fairgrasp_sim::rapier3d::na::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use fairgrasp_sim::scene::{PhysicalParams, Scene};
+use fairgrasp_sim::scene::{ObjectShape, PhysicalParams, Scene};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::VecDeque;
@@ -133,15 +133,23 @@ impl GraspEnv {
         }
     }
 
-    fn sample_params(&mut self) -> (PhysicalParams, Vec<f32>, u32) {
+    /// Arm parameters, object 0's `[edge, mass, friction]` (the configured ones when
+    /// randomisation is off), whether those were drawn, joint jitter and latency.
+    fn sample_params(&mut self) -> (PhysicalParams, [f32; 3], bool, Vec<f32>, u32) {
         let d = self.config.randomization.clone();
         let mut params = self.scene.nominal_params();
+        let configured = &self.scene.config().objects[0];
+        let edge = match configured.shape {
+            ObjectShape::Box { size } => size[0],
+            _ => 0.0,
+        };
+        let nominal_object = [edge, configured.mass, configured.friction];
         if !d.enabled {
-            return (params, Vec::new(), 0);
+            return (params, nominal_object, false, Vec::new(), 0);
         }
-        params.object_mass = uniform(&mut self.rng, d.object_mass);
-        params.object_friction = uniform(&mut self.rng, d.object_friction);
-        params.object_size = uniform(&mut self.rng, d.object_size);
+        let object_mass = uniform(&mut self.rng, d.object_mass);
+        let object_friction = uniform(&mut self.rng, d.object_friction);
+        let object_size = uniform(&mut self.rng, d.object_size);
         params.arm_damping = Some(
             (0..self.scene.arm_dof())
                 .map(|_| uniform(&mut self.rng, d.joint_damping))
@@ -152,7 +160,8 @@ impl GraspEnv {
         let jitter = (0..self.scene.arm_dof())
             .map(|_| (self.rng.random::<f32>() * 2.0 - 1.0) * d.initial_joint_jitter)
             .collect();
-        (params, jitter, latency)
+        let object = [object_size, object_mass, object_friction];
+        (params, object, true, jitter, latency)
     }
 
     fn add_noise(&mut self, obs: &mut [f32]) {
@@ -346,7 +355,7 @@ impl GraspEnv {
     fn render_text(&self) -> String {
         let s = &self.scene;
         let tcp = s.tcp_pose().translation.vector;
-        let obj = s.object_state().pose.translation.vector;
+        let obj = s.object_state(0).pose.translation.vector;
         let steps = self.episode.as_ref().map(|e| e.steps).unwrap_or(0);
         format!(
             "{ENV_ID} step {steps}: q = [{}] rad, tcp = ({:.3}, {:.3}, {:.3}) m, object = ({:.3}, {:.3}, {:.3}) m, opening = {:.1} mm, pads touching = {:?}",
@@ -362,7 +371,7 @@ impl GraspEnv {
             obj.y,
             obj.z,
             s.gripper_opening() * 1000.0,
-            s.finger_contacts()
+            s.finger_contacts(0)
         )
     }
 
@@ -409,18 +418,24 @@ impl Env for GraspEnv {
         if let Some(seed) = seed {
             self.rng = ChaCha8Rng::seed_from_u64(seed);
         }
-        let (params, jitter, latency) = self.sample_params();
-        self.scene.reset_with(&mut self.rng, &params, &jitter)?;
+        let (params, object, drawn, jitter, latency) = self.sample_params();
+        self.scene.restore_home(&params, &jitter)?;
+        if drawn {
+            let [size, mass, friction] = object;
+            let cube = ObjectShape::Box { size: [size; 3] };
+            self.scene.set_object_params(0, &cube, mass, friction)?;
+        }
+        self.scene.place_objects_at_random(&mut self.rng)?;
         let tcp = self.scene.tcp_pose();
         let yaw = tcp.rotation.euler_angles().2;
         let tcp_target = self.scene.top_down_pose(tcp.translation.vector, yaw);
         let no_op = self.no_op_action();
         let previous_action = vec![0.0; self.action_space.dim()];
-        let status = GraspStatus::of(&self.scene);
+        let status = GraspStatus::of(&self.scene, 0);
         let episode_params = EpisodeParams {
-            object_size: params.object_size,
-            object_mass: params.object_mass,
-            object_friction: params.object_friction,
+            object_size: object[0],
+            object_mass: object[1],
+            object_friction: object[2],
             arm_damping: params.arm_damping.clone().unwrap_or_default(),
             gain_scale: params.gain_scale,
             latency_steps: latency,
@@ -482,8 +497,8 @@ impl Env for GraspEnv {
         if obs.iter().any(|v| !v.is_finite()) {
             return Ok(self.non_finite_step());
         }
-        let status = GraspStatus::of(&self.scene);
-        let off_table = self.scene.object_off_table();
+        let status = GraspStatus::of(&self.scene, 0);
+        let off_table = self.scene.object_off_table(0);
         let mut episode = self.episode.take().expect("checked");
         episode.steps += 1;
         let success = episode.tracker.update(&status);

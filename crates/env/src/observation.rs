@@ -120,7 +120,7 @@ pub(crate) fn observe(
     let base_inv: Isometry3<f64> = scene.base_pose().inverse();
     let q = scene.arm_positions();
     let tcp = base_inv * scene.tcp_pose();
-    let object = scene.object_state();
+    let object = scene.object_state(0);
     let object_pose = base_inv * object.pose;
     let (tcp_v, _) = scene.link_velocity("tcp").unwrap_or(([0.0; 3], [0.0; 3]));
     let tcp_v = base_inv.rotation * Vector3::from(tcp_v);
@@ -153,9 +153,9 @@ pub(crate) fn observe(
             ]);
             let to_object = object_pose.translation.vector - tcp.translation.vector;
             push3(out, &to_object);
-            out.push((object.pose.translation.z - scene.object_rest_height()) as f32);
+            out.push((object.pose.translation.z - scene.object_rest_height(0)) as f32);
             out.push(scene.gripper_opening());
-            let contacts = scene.finger_contacts();
+            let contacts = scene.finger_contacts(0);
             out.extend(contacts.map(|c| if c { 1.0 } else { 0.0 }));
             out.extend_from_slice(previous_action);
         }
@@ -167,6 +167,6 @@ pub(crate) fn observe(
 pub fn object_in_tcp_frame(scene: &Scene) -> Vector3<f64> {
     scene
         .tcp_pose()
-        .inverse_transform_point(&Point3::from(scene.object_state().pose.translation.vector))
+        .inverse_transform_point(&Point3::from(scene.object_state(0).pose.translation.vector))
         .coords
 }

@@ -39,7 +39,7 @@ impl ScriptedGraspPolicy {
     /// Plans for the episode that `env` has just been reset to.
     pub fn new(env: &GraspEnv) -> Self {
         let scene = env.scene();
-        let object = scene.object_state().pose;
+        let object = scene.object_state(0).pose;
         let yaw = scene.grasp_yaw(&object.rotation);
         let centre = object.translation.vector;
         let pose = |offset: f64| scene.top_down_pose(centre + Vector3::new(0.0, 0.0, offset), yaw);

@@ -84,7 +84,7 @@ fn seed23_layout_reads_the_scene() {
     let q = scene.arm_positions();
     assert_eq!(&o[0..6], q.as_slice());
     let base = scene.base_pose();
-    let object = base.inverse() * scene.object_state().pose;
+    let object = base.inverse() * scene.object_state(0).pose;
     assert!((o[12] - object.translation.x as f32).abs() < 1e-6);
     assert!((o[14] - object.translation.z as f32).abs() < 1e-6);
     let quat_norm: f32 = o[15..19].iter().map(|v| v * v).sum::<f32>().sqrt();
@@ -140,7 +140,7 @@ fn randomization_varies_the_episode_parameters_within_their_ranges() {
                 .all(|d| *d >= ranges.joint_damping[0] && *d <= ranges.joint_damping[1])
         );
         // The cube really has the drawn size: it rests at half its edge above the table.
-        let rest = env.scene().object_state().pose.translation.z - env.scene().table_top() as f64;
+        let rest = env.scene().object_state(0).pose.translation.z - env.scene().table_top() as f64;
         assert!(
             (rest - p.object_size as f64 / 2.0).abs() < 2e-3,
             "rest {rest} size {}",

@@ -23,12 +23,12 @@ fn physics_steps(c: &mut Criterion) {
             for _ in 0..STEPS {
                 scene.step_physics().expect("step");
             }
-            black_box(scene.object_state())
+            black_box(scene.object_state(0))
         })
     });
 
     scene.reset(0).expect("reset");
-    grasp_and_lift(&mut scene, &PickScript::default(), &mut |s| {
+    grasp_and_lift(&mut scene, 0, &PickScript::default(), &mut |s| {
         s.step_control()
     })
     .expect("grasp");
@@ -39,7 +39,7 @@ fn physics_steps(c: &mut Criterion) {
             for _ in 0..STEPS {
                 scene.step_physics().expect("step");
             }
-            black_box(scene.object_state())
+            black_box(scene.object_state(0))
         })
     });
     group.finish();

@@ -1,7 +1,7 @@
 //! A scripted top-down pick, and the grasp task's success rule.
 //!
-//! The script: open, move above the cube with the fingers aligned to its faces, descend, close,
-//! lift, hold. It drives the arm only through joint position targets (what a policy will do), so
+//! The script: open, move above an object with the fingers across its narrowest width, descend,
+//! close, lift, hold. It drives the arm only through joint position targets (what a policy will do), so
 //! its success shows the scene can be grasped with the controls the environment exposes.
 
 use crate::error::Result;
@@ -43,19 +43,19 @@ pub struct GraspStatus {
 }
 
 impl GraspStatus {
-    /// Reads the scene.
-    pub fn of(scene: &Scene) -> Self {
-        let contacts = scene.finger_contacts();
+    /// Reads the scene about object `object` (its index).
+    pub fn of(scene: &Scene, object: usize) -> Self {
+        let contacts = scene.finger_contacts(object);
         let closed_on_object = scene.gripper_target() < scene.max_opening() * 0.5
             && contacts[0]
             && contacts[1]
             && scene.gripper_opening() > 0.005;
-        let object = scene.object_state().pose.translation.vector;
+        let centre = scene.object_state(object).pose.translation.vector;
         let tcp = scene.tcp_pose().translation.vector;
         Self {
             closed_on_object,
-            lift: object.z - scene.object_rest_height(),
-            offset: (object - tcp).norm(),
+            lift: centre.z - scene.object_rest_height(object),
+            offset: (centre - tcp).norm(),
         }
     }
 
@@ -147,9 +147,11 @@ fn smooth(s: f64) -> f64 {
     s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
 }
 
-/// Runs the scripted pick on a freshly reset scene: approach, descend, close, lift, hold.
+/// Runs the scripted pick of object `object` (its index) on a freshly reset scene: approach,
+/// descend, close, lift, hold.
 pub fn run_scripted_pick(
     scene: &mut Scene,
+    object: usize,
     script: &PickScript,
     rule: SuccessRule,
 ) -> Result<PickOutcome> {
@@ -159,15 +161,15 @@ pub fn run_scripted_pick(
     let mut step = |scene: &mut Scene| -> Result<()> {
         scene.step_control()?;
         steps += 1;
-        success |= tracker.update(&GraspStatus::of(scene));
+        success |= tracker.update(&GraspStatus::of(scene, object));
         Ok(())
     };
-    grasp_and_lift(scene, script, &mut step)?;
+    grasp_and_lift(scene, object, script, &mut step)?;
 
     // Hold, measuring the object's drift relative to the TCP.
     let relative = |scene: &Scene| {
         let tcp = scene.tcp_pose();
-        let p = scene.object_state().pose.translation.vector;
+        let p = scene.object_state(object).pose.translation.vector;
         tcp.inverse_transform_point(&Point3::from(p)).coords
     };
     let at_hold = relative(scene);
@@ -177,7 +179,8 @@ pub fn run_scripted_pick(
         step(scene)?;
         hold_drift = hold_drift.max((relative(scene) - at_hold).norm());
     }
-    let final_lift = scene.object_state().pose.translation.z - scene.object_rest_height();
+    let final_lift =
+        scene.object_state(object).pose.translation.z - scene.object_rest_height(object);
     Ok(PickOutcome {
         success,
         hold_drift,
@@ -186,16 +189,17 @@ pub fn run_scripted_pick(
     })
 }
 
-/// The script up to the end of the lift; `step` advances one control period.
+/// The script up to the end of the lift, picking object `object`; `step` advances one control
+/// period.
 pub fn grasp_and_lift(
     scene: &mut Scene,
+    object: usize,
     script: &PickScript,
     step: &mut dyn FnMut(&mut Scene) -> Result<()>,
 ) -> Result<()> {
     let period = scene.control_period() as f64;
-    let object = scene.object_state().pose;
-    let centre = object.translation.vector;
-    let yaw = scene.grasp_yaw(&object.rotation);
+    let centre = scene.object_state(object).pose.translation.vector;
+    let yaw = scene.object_grasp_yaw(object);
     let pre = scene.top_down_pose(centre + Vector3::new(0.0, 0.0, script.approach_height), yaw);
     let grasp = scene.top_down_pose(centre, yaw);
 
@@ -266,7 +270,7 @@ pub struct PickReport {
     pub failures: Vec<(u64, String)>,
 }
 
-/// Runs `episodes` scripted picks with seeds `seed, seed+1, …`.
+/// Runs `episodes` scripted picks of object 0 with seeds `seed, seed+1, …`.
 pub fn evaluate_scripted_pick(
     scene: &mut Scene,
     episodes: u32,
@@ -283,7 +287,7 @@ pub fn evaluate_scripted_pick(
     for e in 0..episodes as u64 {
         let episode_seed = seed.wrapping_add(e);
         scene.reset(episode_seed)?;
-        match run_scripted_pick(scene, script, rule) {
+        match run_scripted_pick(scene, 0, script, rule) {
             Ok(outcome) => {
                 on_episode(episode_seed, &outcome);
                 if outcome.success {

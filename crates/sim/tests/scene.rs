@@ -5,7 +5,7 @@ use fairgrasp_sim::pick::{
     GraspStatus, PickScript, SuccessRule, grasp_and_lift, run_scripted_pick,
 };
 use fairgrasp_sim::rapier3d::na::{Point3, Vector3};
-use fairgrasp_sim::scene::{Scene, SceneConfig};
+use fairgrasp_sim::scene::{ObjectShape, Scene, SceneConfig};
 
 fn scene() -> Scene {
     Scene::new(SceneConfig::default()).expect("default scene builds")
@@ -26,7 +26,7 @@ fn placements_are_uniform_in_the_area_settled_and_varied() {
     let mut xs = Vec::new();
     let mut yaws = Vec::new();
     for seed in 0..40 {
-        let pose = scene.reset(seed).unwrap();
+        let pose = scene.reset(seed).unwrap()[0];
         let local = base.inverse_transform_point(&Point3::from(pose.translation.vector));
         for k in 0..2 {
             let v = [local.x, local.y][k] as f32;
@@ -36,13 +36,13 @@ fn placements_are_uniform_in_the_area_settled_and_varied() {
             );
         }
         // Settled on the table, not floating or sunk.
-        let rest = scene.object_rest_height();
+        let rest = scene.object_rest_height(0);
         assert!(
             (pose.translation.z - rest).abs() < 2e-3,
             "seed {seed}: z {} vs rest {rest}",
             pose.translation.z
         );
-        let state = scene.object_state();
+        let state = scene.object_state(0);
         assert!(
             Vector3::from(state.linvel).norm() < 0.01,
             "seed {seed}: still moving"
@@ -65,11 +65,11 @@ fn same_seed_gives_a_bit_identical_trajectory() {
         let mut trace = Vec::new();
         let mut step = |s: &mut Scene| {
             s.step_control()?;
-            let o = s.object_state().pose.translation.vector;
+            let o = s.object_state(0).pose.translation.vector;
             trace.push((s.arm_positions(), [o.x, o.y, o.z], s.gripper_opening()));
             Ok(())
         };
-        grasp_and_lift(&mut scene, &PickScript::default(), &mut step).unwrap();
+        grasp_and_lift(&mut scene, 0, &PickScript::default(), &mut step).unwrap();
         trace
     };
     let a = record(11);
@@ -85,7 +85,13 @@ fn reset_restores_the_same_start_after_an_episode() {
     let mut scene = scene();
     let first = scene.reset(5).unwrap();
     let q0 = scene.arm_positions();
-    run_scripted_pick(&mut scene, &PickScript::default(), SuccessRule::default()).unwrap();
+    run_scripted_pick(
+        &mut scene,
+        0,
+        &PickScript::default(),
+        SuccessRule::default(),
+    )
+    .unwrap();
     let again = scene.reset(5).unwrap();
     assert_eq!(first, again);
     assert_eq!(q0, scene.arm_positions());
@@ -175,26 +181,28 @@ fn gripper_opens_closes_and_reports_its_opening() {
 fn a_grasp_touches_with_both_pads_and_stops_the_fingers_at_the_cube() {
     let mut scene = scene();
     scene.reset(3).unwrap();
-    assert_eq!(scene.finger_contacts(), [false, false]);
-    assert_eq!(scene.in_contact("object", "table"), Some(true));
-    grasp_and_lift(&mut scene, &PickScript::default(), &mut |s| {
+    assert_eq!(scene.finger_contacts(0), [false, false]);
+    assert_eq!(scene.in_contact("cube", "table"), Some(true));
+    grasp_and_lift(&mut scene, 0, &PickScript::default(), &mut |s| {
         s.step_control()
     })
     .unwrap();
-    assert_eq!(scene.finger_contacts(), [true, true]);
-    assert_eq!(scene.in_contact("left_finger", "object"), Some(true));
-    assert_eq!(scene.in_contact("object", "table"), Some(false));
-    let size = scene.config().object.size;
+    assert_eq!(scene.finger_contacts(0), [true, true]);
+    assert_eq!(scene.in_contact("left_finger", "cube"), Some(true));
+    assert_eq!(scene.in_contact("cube", "table"), Some(false));
+    let ObjectShape::Box { size: [size, _, _] } = scene.object_config(0).shape else {
+        panic!("the default object is a box");
+    };
     assert!(
         (scene.gripper_opening() - size).abs() < 3e-3,
         "opening {} around a {size} m cube",
         scene.gripper_opening()
     );
-    let status = GraspStatus::of(&scene);
+    let status = GraspStatus::of(&scene, 0);
     assert!(status.closed_on_object);
     assert!(status.lift > 0.1, "lift {}", status.lift);
     assert!(status.offset < 0.02, "offset {}", status.offset);
-    assert_eq!(scene.in_contact("no_such_link", "object"), None);
+    assert_eq!(scene.in_contact("no_such_link", "cube"), None);
 }
 
 #[test]
@@ -207,9 +215,13 @@ fn scripted_pick_succeeds_and_holds_at_240_and_120_hz() {
         let mut scene = Scene::new(config).unwrap();
         for seed in 100..106 {
             scene.reset(seed).unwrap();
-            let outcome =
-                run_scripted_pick(&mut scene, &PickScript::default(), SuccessRule::default())
-                    .unwrap();
+            let outcome = run_scripted_pick(
+                &mut scene,
+                0,
+                &PickScript::default(),
+                SuccessRule::default(),
+            )
+            .unwrap();
             assert!(outcome.success, "{hz} Hz, seed {seed}: {outcome:?}");
             assert!(
                 outcome.hold_drift < 0.01,
@@ -224,13 +236,13 @@ fn scripted_pick_succeeds_and_holds_at_240_and_120_hz() {
 fn a_long_hold_while_moving_keeps_the_cube() {
     let mut scene = scene();
     scene.reset(8).unwrap();
-    grasp_and_lift(&mut scene, &PickScript::default(), &mut |s| {
+    grasp_and_lift(&mut scene, 0, &PickScript::default(), &mut |s| {
         s.step_control()
     })
     .unwrap();
     let relative = |scene: &Scene| {
         let tcp = scene.tcp_pose();
-        tcp.inverse_transform_point(&Point3::from(scene.object_state().pose.translation.vector))
+        tcp.inverse_transform_point(&Point3::from(scene.object_state(0).pose.translation.vector))
             .coords
     };
     let start = relative(&scene);
@@ -251,7 +263,7 @@ fn a_long_hold_while_moving_keeps_the_cube() {
         worst < 0.01,
         "cube crept {worst} m relative to the fingers over 30 s"
     );
-    assert!(GraspStatus::of(&scene).closed_on_object);
+    assert!(GraspStatus::of(&scene, 0).closed_on_object);
 }
 
 #[test]
@@ -309,7 +321,8 @@ fn bad_commands_are_errors_not_panics() {
     assert!(err.contains("j3") && err.contains("NaN"), "{err}");
     assert!(scene.set_arm_torques(&[f32::INFINITY; 6]).is_err());
     assert!(scene.set_arm_positions(&[0.0; 3]).is_err());
-    assert!(scene.set_object_properties(-1.0, 0.5).is_err());
+    let cube = scene.object_config(0).shape.clone();
+    assert!(scene.set_object_params(0, &cube, -1.0, 0.5).is_err());
     // The scene still works afterwards.
     scene.step_control().unwrap();
 }
@@ -320,7 +333,11 @@ fn invalid_settings_name_their_key() {
     let cases: [(&str, Mutation); 6] = [
         ("physics.dt", |c| c.physics.dt = 0.0),
         ("physics.substeps", |c| c.physics.substeps = 0),
-        ("object.size", |c| c.object.size = 0.2),
+        ("objects[0].shape", |c| {
+            c.objects[0].shape = ObjectShape::Box {
+                size: [0.2, 0.2, 0.2],
+            }
+        }),
         ("gripper.force_limit", |c| c.gripper.force_limit = f32::NAN),
         ("arm.home", |c| c.arm.home = vec![0.0; 3]),
         ("table.height", |c| c.table.height = -1.0),

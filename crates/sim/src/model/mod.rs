@@ -8,6 +8,7 @@ mod mesh;
 mod packages;
 mod parse;
 
+pub(crate) use mesh::load_mesh;
 pub use mesh::{MeshCollision, TriangleMesh};
 pub use packages::PackagePaths;
 

@@ -1,310 +1,40 @@
-//! The grasp scene: an arm with a gripper on a table, and a cube placed at random in front of it.
+//! The grasp scene: an arm with a gripper on a table, objects to pick and bins to put them in.
 //!
 //! [`Scene`] owns the rapier world and offers what PyBullet users reach for: stepping at a fixed
 //! physics rate, a control period of k physics steps, joint position and torque control, joint and
 //! link state, object state, finger opening, pad contacts and inverse kinematics. Resets restore a
 //! snapshot of the world taken at construction, so they cost microseconds, not a reload.
+//!
+//! - `config.rs`: the settings and their validation;
+//! - `objects.rs`: object shapes, objects and bins in the world, their queries, placement checks;
+//! - this file: the world, stepping, snapshots, arm, gripper, kinematics and reset.
+//!
+//! Objects are addressed by their index in `config.objects`, bins by theirs in `config.bins`.
+//! Tasks own placement: [`Scene::restore_home`], then [`Scene::set_object_params`] and
+//! [`Scene::set_object_pose`] (checked with [`Scene::pose_is_free`] and
+//! [`Scene::reachable_from_above`]), then [`Scene::settle`]. [`Scene::reset`] does all of it with
+//! a random layout.
+
+mod config;
+mod objects;
+
+pub use config::{
+    ArmConfig, BinConfig, GripperConfig, MAX_GRASP_WIDTH, MAX_OBJECTS, ObjectConfig, ObjectShape,
+    PhysicsConfig, PlacementConfig, SceneConfig, TableConfig,
+};
 
 use crate::error::{Result, SimError};
 use crate::kinematics::SerialChain;
-use crate::math::{iso_to_pose, pose_to_iso, yaw_of};
-use crate::model::{MeshCollision, Origin, RobotModel};
+use crate::math::yaw_of;
+use crate::model::{Origin, RobotModel};
 use crate::robot::{PdGains, Robot, RobotBuildOptions, groups};
 use crate::{assets, model::LoadOptions};
+use objects::{MeshCache, ObjectHandles};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::na::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::path::PathBuf;
-
-/// Physics settings.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct PhysicsConfig {
-    /// Physics timestep (s). 1/240 like PyBullet; 1/120 also holds grasps.
-    pub dt: f32,
-    /// Physics steps per control step (the control period is `dt × substeps`).
-    pub substeps: u32,
-    /// Solver iterations (substeps) per physics step. Each one re-assembles the arm's
-    /// joint-space mass matrix, the largest cost of a step.
-    pub solver_iterations: usize,
-    /// Gauss-Seidel sweeps inside each solver iteration: they tighten contacts and joints
-    /// without the mass-matrix cost of another substep.
-    pub pgs_iterations: usize,
-    /// Contact stiffness as a natural frequency (Hz). rapier's default (30 Hz) lets a hard-squeezed
-    /// light cube sink centimetres into the pads; 300 Hz keeps penetration under a millimetre.
-    pub contact_frequency: f32,
-    pub gravity: f32,
-}
-
-impl Default for PhysicsConfig {
-    fn default() -> Self {
-        Self {
-            dt: 1.0 / 240.0,
-            substeps: 8,
-            // One substep with six Gauss-Seidel sweeps: the arm's mass matrix is assembled once
-            // per step (2.5× faster than two substeps) and the sweeps still hold a squeezed cube
-            // with < 1 mm of creep over 30 s of motion at 240 Hz and 120 Hz (measured; see
-            // docs/simulation.md).
-            solver_iterations: 1,
-            pgs_iterations: 6,
-            contact_frequency: 300.0,
-            gravity: 9.81,
-        }
-    }
-}
-
-/// The table the arm stands on.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TableConfig {
-    /// Height of the table top above the floor (m).
-    pub height: f32,
-    /// Table top size along x and y (m).
-    pub size: [f32; 2],
-    /// Centre of the table top in the world x, y (m).
-    pub center: [f32; 2],
-    pub friction: f32,
-}
-
-impl Default for TableConfig {
-    fn default() -> Self {
-        Self {
-            height: 0.75,
-            size: [1.4, 1.2],
-            center: [0.35, 0.0],
-            friction: 0.6,
-        }
-    }
-}
-
-/// The object to grasp: a cube.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ObjectConfig {
-    /// Edge length (m).
-    pub size: f32,
-    pub mass: f32,
-    pub friction: f32,
-}
-
-impl Default for ObjectConfig {
-    fn default() -> Self {
-        Self {
-            size: 0.05,
-            mass: 0.1,
-            friction: 0.8,
-        }
-    }
-}
-
-/// Where objects are placed at reset: uniform in a rectangle on the table, uniform yaw.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct PlacementConfig {
-    /// Centre of the area, in the arm base frame x, y (m).
-    pub center: [f32; 2],
-    /// Extent of the area along x and y (m).
-    pub size: [f32; 2],
-    /// Yaw drawn from [-yaw_range, yaw_range] (rad).
-    pub yaw_range: f32,
-}
-
-impl Default for PlacementConfig {
-    fn default() -> Self {
-        Self {
-            center: [0.5, 0.0],
-            size: [0.4, 0.4],
-            yaw_range: std::f32::consts::PI,
-        }
-    }
-}
-
-/// The gripper on the flange.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct GripperConfig {
-    /// Largest squeezing force of the finger drive (N).
-    pub force_limit: f32,
-    /// Friction coefficient of the finger pads.
-    pub pad_friction: f32,
-    pub kp: f32,
-    pub kd: f32,
-}
-
-impl Default for GripperConfig {
-    fn default() -> Self {
-        Self {
-            force_limit: 40.0,
-            pad_friction: 1.5,
-            kp: 2_000.0,
-            kd: 40.0,
-        }
-    }
-}
-
-/// The arm and its drives.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ArmConfig {
-    /// URDF of the arm; the bundled FR5 when `None`.
-    pub urdf: Option<PathBuf>,
-    /// Extra `package://` search roots.
-    pub package_paths: Vec<PathBuf>,
-    /// Link the gripper is mounted on.
-    pub flange_link: String,
-    /// Base position in the world (m): on the table top by default.
-    pub base_xyz: [f32; 3],
-    /// Base yaw (rad).
-    pub base_yaw: f32,
-    /// Joint vector at reset (rad).
-    pub home: Vec<f32>,
-    /// PD gains of the arm joints (N·m/rad, N·m·s/rad).
-    pub kp: f32,
-    pub kd: f32,
-    /// Rotor inertia added to every joint (kg·m²).
-    pub armature: f32,
-    pub self_collision: bool,
-    pub mesh_collision: MeshCollision,
-}
-
-impl Default for ArmConfig {
-    fn default() -> Self {
-        Self {
-            urdf: None,
-            package_paths: Vec::new(),
-            flange_link: "tool0".into(),
-            base_xyz: [0.0, 0.0, 0.75],
-            base_yaw: 0.0,
-            // Flange pointing down, about 30 cm above the middle of the placement area.
-            home: vec![
-                0.2056,
-                -1.5709,
-                -1.7669,
-                -1.3746,
-                std::f32::consts::FRAC_PI_2,
-                -1.3651,
-            ],
-            kp: 8_000.0,
-            kd: 400.0,
-            armature: 0.1,
-            self_collision: false,
-            mesh_collision: MeshCollision::ConvexHull,
-        }
-    }
-}
-
-/// Everything that defines a scene.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SceneConfig {
-    pub physics: PhysicsConfig,
-    pub table: TableConfig,
-    pub object: ObjectConfig,
-    pub placement: PlacementConfig,
-    pub gripper: GripperConfig,
-    pub arm: ArmConfig,
-}
-
-impl SceneConfig {
-    /// Checks ranges; the error names the key.
-    pub fn validate(&self) -> Result<()> {
-        let p = &self.physics;
-        let positive = |key: &str, v: f32| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(SimError::config(
-                    key,
-                    format!("must be a positive number, got {v}"),
-                ))
-            }
-        };
-        positive("physics.dt", p.dt)?;
-        if p.dt > 1.0 / 60.0 {
-            return Err(SimError::config(
-                "physics.dt",
-                format!("{} s is too coarse for grasping; use at most 1/60 s", p.dt),
-            ));
-        }
-        if p.substeps == 0 {
-            return Err(SimError::config("physics.substeps", "must be at least 1"));
-        }
-        if p.solver_iterations == 0 || p.solver_iterations > 100 {
-            return Err(SimError::config(
-                "physics.solver_iterations",
-                "must be in 1..=100",
-            ));
-        }
-        if p.pgs_iterations == 0 || p.pgs_iterations > 100 {
-            return Err(SimError::config(
-                "physics.pgs_iterations",
-                "must be in 1..=100",
-            ));
-        }
-        positive("physics.contact_frequency", p.contact_frequency)?;
-        if !p.gravity.is_finite() {
-            return Err(SimError::config("physics.gravity", "must be finite"));
-        }
-        positive("table.size[0]", self.table.size[0])?;
-        positive("table.size[1]", self.table.size[1])?;
-        if !self.table.height.is_finite() || self.table.height < 0.0 {
-            return Err(SimError::config(
-                "table.height",
-                "must be a non-negative number",
-            ));
-        }
-        positive("table.friction", self.table.friction)?;
-        positive("object.size", self.object.size)?;
-        if self.object.size > 0.085 {
-            return Err(SimError::config(
-                "object.size",
-                format!(
-                    "{} m does not fit the 90 mm gripper opening",
-                    self.object.size
-                ),
-            ));
-        }
-        positive("object.mass", self.object.mass)?;
-        positive("object.friction", self.object.friction)?;
-        if !(self
-            .placement
-            .size
-            .iter()
-            .all(|v| v.is_finite() && *v >= 0.0))
-        {
-            return Err(SimError::config("placement.size", "must be non-negative"));
-        }
-        if !self.placement.yaw_range.is_finite() || self.placement.yaw_range < 0.0 {
-            return Err(SimError::config(
-                "placement.yaw_range",
-                "must be non-negative",
-            ));
-        }
-        positive("gripper.force_limit", self.gripper.force_limit)?;
-        positive("gripper.pad_friction", self.gripper.pad_friction)?;
-        positive("gripper.kp", self.gripper.kp)?;
-        if !(self.gripper.kd.is_finite() && self.gripper.kd >= 0.0) {
-            return Err(SimError::config("gripper.kd", "must be non-negative"));
-        }
-        positive("arm.kp", self.arm.kp)?;
-        if !(self.arm.kd.is_finite() && self.arm.kd >= 0.0) {
-            return Err(SimError::config("arm.kd", "must be non-negative"));
-        }
-        if !(self.arm.armature.is_finite() && self.arm.armature >= 0.0) {
-            return Err(SimError::config("arm.armature", "must be non-negative"));
-        }
-        if self.arm.base_xyz.iter().any(|v| !v.is_finite()) || !self.arm.base_yaw.is_finite() {
-            return Err(SimError::config("arm.base_xyz", "must be finite"));
-        }
-        if self.arm.home.iter().any(|v| !v.is_finite()) {
-            return Err(SimError::config("arm.home", "must be finite"));
-        }
-        Ok(())
-    }
-}
 
 /// The parts of the rapier world that change while stepping; cloned for snapshots.
 #[derive(Clone)]
@@ -324,20 +54,36 @@ struct WorldState {
 pub struct Snapshot {
     world: WorldState,
     robot: Robot,
+    layout: Layout,
     time: f64,
 }
 
-/// Physical parameters that domain randomisation varies per episode (see [`Scene::reset_with`]).
+/// What tasks change per episode outside the physics world: the object settings in force
+/// (shape, mass, friction) and the bin centres.
+#[derive(Clone)]
+struct Layout {
+    objects: Vec<ObjectConfig>,
+    bins: Vec<BinConfig>,
+}
+
+/// Arm parameters that domain randomisation varies per episode (see [`Scene::reset_with`]);
+/// objects change through [`Scene::set_object_params`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct PhysicalParams {
-    /// Cube edge length (m).
-    pub object_size: f32,
-    pub object_mass: f32,
-    pub object_friction: f32,
     /// Viscous damping of each arm joint (N·m·s/rad); `None` keeps the URDF values.
     pub arm_damping: Option<Vec<f32>>,
     /// Factor on the arm's PD gains (actuator strength).
     pub gain_scale: f32,
+}
+
+impl Default for PhysicalParams {
+    /// The configured arm: URDF damping, gains unscaled.
+    fn default() -> Self {
+        Self {
+            arm_damping: None,
+            gain_scale: 1.0,
+        }
+    }
 }
 
 /// The pose and velocity of a rigid object.
@@ -364,11 +110,13 @@ pub struct Scene {
     finger_bodies: [RigidBodyHandle; 2],
     chain: SerialChain,
     base: Isometry3<f64>,
-    object: RigidBodyHandle,
-    object_collider: ColliderHandle,
+    table_collider: ColliderHandle,
+    /// In config order.
+    objects: Vec<ObjectHandles>,
+    bin_bodies: Vec<RigidBodyHandle>,
+    layout: Layout,
+    meshes: MeshCache,
     table_top: f32,
-    /// Edge length of the cube in this episode.
-    object_size: f32,
     home: Snapshot,
     /// TCP pose at the home joint vector.
     home_tcp: Isometry3<f64>,
@@ -378,7 +126,8 @@ pub struct Scene {
 const TCP_LINK: &str = "tcp";
 
 impl Scene {
-    /// Builds the scene: arm + gripper + table + cube, arm at home.
+    /// Builds the scene: arm + gripper + table + bins, arm at home, objects parked (see
+    /// [`Self::park_objects`]) until a reset places them.
     pub fn new(config: SceneConfig) -> Result<Self> {
         config.validate()?;
         let mut arm_model = match &config.arm.urdf {
@@ -487,7 +236,7 @@ impl Scene {
                 ))
                 .build(),
         );
-        world.colliders.insert_with_parent(
+        let table_collider = world.colliders.insert_with_parent(
             ColliderBuilder::cuboid(t.size[0] / 2.0, t.size[1] / 2.0, thickness / 2.0)
                 .friction(t.friction)
                 .collision_groups(InteractionGroups::new(
@@ -497,33 +246,6 @@ impl Scene {
                 ))
                 .build(),
             table,
-            &mut world.bodies,
-        );
-
-        // Object: parked out of the way until a reset places it.
-        let o = &config.object;
-        let object = world.bodies.insert(
-            RigidBodyBuilder::dynamic()
-                .translation(Vector::new(
-                    t.center[0],
-                    t.center[1],
-                    t.height + o.size / 2.0,
-                ))
-                .can_sleep(false)
-                .build(),
-        );
-        let half = o.size / 2.0;
-        let object_collider = world.colliders.insert_with_parent(
-            ColliderBuilder::cuboid(half, half, half)
-                .mass(o.mass)
-                .friction(o.friction)
-                .collision_groups(InteractionGroups::new(
-                    groups::OBJECT,
-                    Group::ALL,
-                    InteractionTestMode::And,
-                ))
-                .build(),
-            object,
             &mut world.bodies,
         );
 
@@ -549,6 +271,10 @@ impl Scene {
             home: Snapshot {
                 world: world.clone(),
                 robot: robot.clone(),
+                layout: Layout {
+                    objects: Vec::new(),
+                    bins: Vec::new(),
+                },
                 time: 0.0,
             },
             world,
@@ -558,14 +284,20 @@ impl Scene {
             finger_bodies,
             chain,
             base,
-            object,
-            object_collider,
+            table_collider,
+            objects: Vec::new(),
+            bin_bodies: Vec::new(),
+            layout: Layout {
+                objects: config.objects.clone(),
+                bins: config.bins.clone(),
+            },
+            meshes: MeshCache::new(),
             table_top,
-            object_size: config.object.size,
             home_tcp: Isometry3::identity(),
             time: 0.0,
             config,
         };
+        scene.add_objects_and_bins()?;
         let home = scene.config.arm.home.clone();
         scene.set_arm_positions(&home)?;
         scene.set_gripper_opening_now(scene.max_opening())?;
@@ -576,10 +308,43 @@ impl Scene {
         }
         // One zero-length step registers the colliders with the broad and narrow phases.
         scene.step_physics()?;
+        scene.park_objects();
         scene.time = 0.0;
         scene.home = scene.snapshot();
         scene.home_tcp = scene.tcp_pose();
         Ok(scene)
+    }
+
+    /// Builds the configured objects (disabled until placed) and bins into the world.
+    fn add_objects_and_bins(&mut self) -> Result<()> {
+        for (i, object) in self.config.objects.iter().enumerate() {
+            let key = format!("objects[{i}]");
+            if self.robot.link_body(&object.name).is_some() {
+                return Err(SimError::config(
+                    format!("{key}.name"),
+                    format!("'{}' is the name of a robot link", object.name),
+                ));
+            }
+            let geometry = objects::object_geometry(&object.shape, &mut self.meshes).map_err(
+                |(field, problem)| {
+                    SimError::config(config::subkey(&format!("{key}.shape"), &field), problem)
+                },
+            )?;
+            let handles = objects::insert_object(&mut self.world, object, &geometry);
+            self.objects.push(handles);
+        }
+        for (j, bin) in self.config.bins.iter().enumerate() {
+            if self.robot.link_body(&bin.name).is_some() {
+                return Err(SimError::config(
+                    format!("bins[{j}].name"),
+                    format!("'{}' is the name of a robot link", bin.name),
+                ));
+            }
+            let pose = self.bin_body_pose(bin.center);
+            let body = objects::insert_bin(&mut self.world, bin, pose, self.config.table.friction);
+            self.bin_bodies.push(body);
+        }
+        Ok(())
     }
 
     pub fn config(&self) -> &SceneConfig {
@@ -625,6 +390,7 @@ impl Scene {
         Snapshot {
             world: self.world.clone(),
             robot: self.robot.clone(),
+            layout: self.layout.clone(),
             time: self.time,
         }
     }
@@ -633,6 +399,7 @@ impl Scene {
     pub fn restore(&mut self, snapshot: &Snapshot) {
         self.world.clone_from(&snapshot.world);
         self.robot.clone_from(&snapshot.robot);
+        self.layout.clone_from(&snapshot.layout);
         self.time = snapshot.time;
     }
 
@@ -825,48 +592,6 @@ impl Scene {
             .set_joint_positions(&q, &mut self.world.bodies, &mut self.world.multibody_joints)
     }
 
-    /// Whether each finger pad (left, right) touches the object.
-    pub fn finger_contacts(&self) -> [bool; 2] {
-        self.finger_bodies.map(|b| {
-            self.world.bodies[b].colliders().iter().any(|&c| {
-                self.world
-                    .narrow_phase
-                    .contact_pair(c, self.object_collider)
-                    .is_some_and(|p| p.has_any_active_contact())
-            })
-        })
-    }
-
-    /// Whether two named things touch: a robot link name, `"object"` or `"table"`.
-    pub fn in_contact(&self, a: &str, b: &str) -> Option<bool> {
-        let a = self.colliders_of(a)?;
-        let b = self.colliders_of(b)?;
-        Some(a.iter().any(|&ca| {
-            b.iter().any(|&cb| {
-                self.world
-                    .narrow_phase
-                    .contact_pair(ca, cb)
-                    .is_some_and(|p| p.has_any_active_contact())
-            })
-        }))
-    }
-
-    fn colliders_of(&self, name: &str) -> Option<Vec<ColliderHandle>> {
-        match name {
-            "object" => Some(vec![self.object_collider]),
-            "table" => self
-                .world
-                .colliders
-                .iter()
-                .find(|(_, c)| c.collision_groups().memberships == groups::TABLE)
-                .map(|(h, _)| vec![h]),
-            link => {
-                let body = self.robot.link_body(link)?;
-                Some(self.world.bodies[body].colliders().to_vec())
-            }
-        }
-    }
-
     // ── Poses ──────────────────────────────────────────────────────────────
 
     /// World pose of any robot link (merged frames such as `tool0` and `tcp` included).
@@ -891,69 +616,17 @@ impl Scene {
             .expect("flange link checked at build")
     }
 
-    /// Pose and velocity of the object.
-    pub fn object_state(&self) -> ObjectState {
-        let body = &self.world.bodies[self.object];
-        let v = body.linvel();
-        let w = body.angvel();
-        ObjectState {
-            pose: pose_to_iso(body.position()),
-            linvel: [v.x as f64, v.y as f64, v.z as f64],
-            angvel: [w.x as f64, w.y as f64, w.z as f64],
-        }
-    }
-
-    /// Height of the object's centre when resting on the table (m).
-    pub fn object_rest_height(&self) -> f64 {
-        (self.table_top + self.object_size / 2.0) as f64
-    }
-
-    /// Edge length of the cube in this episode (m).
-    pub fn object_size(&self) -> f32 {
-        self.object_size
-    }
-
-    /// Whether the object has left the table: dropped below its top or beyond its edges.
-    pub fn object_off_table(&self) -> bool {
-        let p = self.object_state().pose.translation.vector;
-        let t = &self.config.table;
-        p.z < (self.table_top - self.object_size) as f64
-            || (p.x - t.center[0] as f64).abs() > t.size[0] as f64 / 2.0
-            || (p.y - t.center[1] as f64).abs() > t.size[1] as f64 / 2.0
-    }
-
-    /// The physical parameters of the configuration, unrandomised.
+    /// The arm parameters of the configuration, unrandomised.
     pub fn nominal_params(&self) -> PhysicalParams {
-        PhysicalParams {
-            object_size: self.config.object.size,
-            object_mass: self.config.object.mass,
-            object_friction: self.config.object.friction,
-            arm_damping: None,
-            gain_scale: 1.0,
-        }
+        PhysicalParams::default()
     }
 
     fn apply_params(&mut self, params: &PhysicalParams) -> Result<()> {
-        let size = params.object_size;
-        if !(size.is_finite() && size > 0.0 && size <= 0.085) {
-            return Err(SimError::Command(format!(
-                "object size {size} m must be in (0, 0.085]"
-            )));
-        }
         if !(params.gain_scale.is_finite() && params.gain_scale > 0.0) {
             return Err(SimError::Command(format!(
                 "gain scale {} must be positive",
                 params.gain_scale
             )));
-        }
-        self.set_object_properties(params.object_mass, params.object_friction)?;
-        if size != self.object_size {
-            let half = size / 2.0;
-            let mass = params.object_mass;
-            let collider = &mut self.world.colliders[self.object_collider];
-            collider.set_shape(SharedShape::cuboid(half, half, half));
-            collider.set_mass(mass);
-            self.object_size = size;
         }
         for (i, &j) in self.arm.iter().enumerate() {
             if let Some(damping) = &params.arm_damping {
@@ -979,27 +652,6 @@ impl Scene {
         let targets = self.robot.position_targets().to_vec();
         self.robot
             .set_position_targets(&targets, &mut self.world.multibody_joints)
-    }
-
-    /// Places the object at `pose` (world) with zero velocity.
-    pub fn set_object_pose(&mut self, pose: &Isometry3<f64>) {
-        let body = &mut self.world.bodies[self.object];
-        body.set_position(iso_to_pose(pose), true);
-        body.set_linvel(Vector::ZERO, true);
-        body.set_angvel(Vector::ZERO, true);
-    }
-
-    /// Changes the object's mass and friction (for domain randomisation).
-    pub fn set_object_properties(&mut self, mass: f32, friction: f32) -> Result<()> {
-        if !(mass.is_finite() && mass > 0.0 && friction.is_finite() && friction >= 0.0) {
-            return Err(SimError::Command(format!(
-                "object mass {mass} and friction {friction} must be positive"
-            )));
-        }
-        let c = &mut self.world.colliders[self.object_collider];
-        c.set_mass(mass);
-        c.set_friction(friction);
-        Ok(())
     }
 
     // ── Kinematics ─────────────────────────────────────────────────────────
@@ -1047,31 +699,40 @@ impl Scene {
 
     // ── Reset ──────────────────────────────────────────────────────────────
 
-    /// Restores the home state and places the object at random (uniform in the placement area,
-    /// uniform yaw), retrying until the placement is reachable and collision-free; then lets it
-    /// settle. Returns the object pose.
-    pub fn reset(&mut self, seed: u64) -> Result<Isometry3<f64>> {
+    /// Restores the home state and places every object at random (see
+    /// [`Self::place_objects_at_random`]). Returns the object poses, in config order.
+    pub fn reset(&mut self, seed: u64) -> Result<Vec<Isometry3<f64>>> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         self.reset_with_rng(&mut rng)
     }
 
     /// [`Self::reset`] drawing from a caller's random stream.
-    pub fn reset_with_rng(&mut self, rng: &mut impl Rng) -> Result<Isometry3<f64>> {
+    pub fn reset_with_rng(&mut self, rng: &mut impl Rng) -> Result<Vec<Isometry3<f64>>> {
         let nominal = self.nominal_params();
         self.reset_with(rng, &nominal, &[])
     }
 
-    /// Resets with given physical parameters and an offset added to the home joint vector
-    /// (initial joint jitter), then places the object as [`Self::reset`] does.
+    /// [`Self::restore_home`], then places every object at random as [`Self::reset`] does.
     pub fn reset_with(
         &mut self,
         rng: &mut impl Rng,
         params: &PhysicalParams,
         home_offset: &[f32],
-    ) -> Result<Isometry3<f64>> {
-        let home = self.home.clone();
-        self.restore(&home);
-        self.object_size = self.config.object.size;
+    ) -> Result<Vec<Isometry3<f64>>> {
+        self.restore_home(params, home_offset)?;
+        self.place_objects_at_random(rng)
+    }
+
+    /// Restores the home state (arm at home, objects parked with their configured settings, bins
+    /// at their configured centres, time 0), applies the arm parameters and adds `home_offset`
+    /// to the home joint vector (initial joint jitter; missing values are 0). Tasks then place
+    /// objects and call [`Self::settle`].
+    pub fn restore_home(&mut self, params: &PhysicalParams, home_offset: &[f32]) -> Result<()> {
+        // Field by field: cloning the whole home snapshot first would copy the world twice.
+        self.world.clone_from(&self.home.world);
+        self.robot.clone_from(&self.home.robot);
+        self.layout.clone_from(&self.home.layout);
+        self.time = self.home.time;
         self.apply_params(params)?;
         if !home_offset.is_empty() {
             let q: Vec<f32> = self
@@ -1084,75 +745,6 @@ impl Scene {
                 .collect();
             self.set_arm_positions(&q)?;
         }
-        let p = &self.config.placement;
-        let home_q = self.arm_positions();
-        for _ in 0..100 {
-            let local_x = p.center[0] + (rng.random::<f32>() - 0.5) * p.size[0];
-            let local_y = p.center[1] + (rng.random::<f32>() - 0.5) * p.size[1];
-            let yaw = (rng.random::<f32>() * 2.0 - 1.0) * p.yaw_range;
-            let world_xy =
-                self.base * rapier3d::na::Point3::new(local_x as f64, local_y as f64, 0.0);
-            let position = Vector3::new(world_xy.x, world_xy.y, self.object_rest_height() + 0.001);
-            let pose = Isometry3::from_parts(
-                Translation3::from(position),
-                UnitQuaternion::from_euler_angles(
-                    0.0,
-                    0.0,
-                    yaw as f64 + yaw_of(&self.base.rotation),
-                ),
-            );
-            if self.placement_is_valid(&pose, &home_q) {
-                self.set_object_pose(&pose);
-                self.settle()?;
-                self.time = 0.0;
-                return Ok(self.object_state().pose);
-            }
-        }
-        Err(SimError::config(
-            "placement",
-            "no reachable, collision-free placement found in 100 draws; check the area",
-        ))
-    }
-
-    /// Reachable from above (pre-grasp and grasp poses solve) and clear of the robot.
-    fn placement_is_valid(&self, pose: &Isometry3<f64>, seed: &[f32]) -> bool {
-        let centre = pose.translation.vector;
-        let yaw = self.grasp_yaw(&pose.rotation);
-        for lift in [0.0, 0.15] {
-            let target = self.top_down_pose(centre + Vector3::new(0.0, 0.0, lift), yaw);
-            if self.solve_ik(&target, seed).is_err() {
-                return false;
-            }
-        }
-        let half = self.config.object.size / 2.0;
-        let cube = Cuboid::new(Vector::new(half, half, half));
-        let cube_pose = iso_to_pose(pose);
-        !self.robot.bodies.iter().any(|&b| {
-            self.world.bodies[b].colliders().iter().any(|&c| {
-                let collider = &self.world.colliders[c];
-                rapier3d::parry::query::intersection_test(
-                    &cube_pose,
-                    &cube,
-                    collider.position(),
-                    collider.shape(),
-                )
-                .map(|hit| hit.intersecting)
-                .unwrap_or(true)
-            })
-        })
-    }
-
-    /// Steps until the object rests (speed below 1 mm/s), at most one simulated second.
-    fn settle(&mut self) -> Result<()> {
-        let max_steps = (1.0 / self.params.dt).ceil() as usize;
-        for i in 0..max_steps {
-            self.step_physics()?;
-            let s = self.object_state();
-            let speed = Vector3::from(s.linvel).norm() + Vector3::from(s.angvel).norm() * 0.05;
-            if i >= 4 && speed < 1e-3 {
-                break;
-            }
-        }
-        self.check_finite()
+        Ok(())
     }
 }
