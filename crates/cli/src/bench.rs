@@ -5,7 +5,7 @@
 
 use crate::SceneArgs;
 use anyhow::Result;
-use fairgrasp_env::{Env, EnvConfig, GraspEnv, VecEnv, VectorEnv};
+use fairgrasp_env::{Env, GraspConfig, GraspEnv, VecEnv, VectorEnv};
 use fairgrasp_sim::pick::{PickScript, grasp_and_lift};
 use fairgrasp_sim::scene::{Scene, Snapshot};
 use rand::SeedableRng;
@@ -133,7 +133,7 @@ fn physics(args: &PhysicsBenchArgs) -> Result<()> {
 }
 
 /// Env steps per second of `num_envs` environments on `threads` threads (1 env: no vectorisation).
-fn env_rate(config: &EnvConfig, num_envs: usize, threads: usize, seconds: f64) -> Result<f64> {
+fn env_rate(config: &GraspConfig, num_envs: usize, threads: usize, seconds: f64) -> Result<f64> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     if num_envs == 1 {
         let mut env = GraspEnv::new(config.clone())?;
@@ -169,7 +169,7 @@ fn env_rate(config: &EnvConfig, num_envs: usize, threads: usize, seconds: f64) -
 fn env(args: &EnvBenchArgs) -> Result<()> {
     anyhow::ensure!(args.seconds > 0.0, "--seconds must be positive");
     anyhow::ensure!(args.num_envs >= 2, "--num-envs must be at least 2");
-    let config = args.env.env_config()?;
+    let config = args.env.grasp_config()?;
     let single = env_rate(&config, 1, 1, args.seconds)?;
     let vec1 = env_rate(&config, args.num_envs, 1, args.seconds)?;
     let vec2 = env_rate(&config, args.num_envs, 2, args.seconds)?;

@@ -1,10 +1,12 @@
-//! `fairgrasp env …`: check, exercise and measure the grasp environment.
+//! `fairgrasp env …`: list, check, exercise and measure the registered environments.
 
 use anyhow::{Context, Result};
 use fairgrasp_env::check::{CheckReport, check_env};
-use fairgrasp_env::config::{ActionMode, EnvConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::config::{apply_override, read_table};
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
-use fairgrasp_env::{Env, EpisodeEvent, GraspEnv, Info, VecEnv, VectorEnv};
+use fairgrasp_env::tasks::grasp::{GraspConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::{Env, EpisodeEvent, GraspEnv, Info, VecEnv, VectorEnv, registry};
 use rand::SeedableRng;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -12,25 +14,54 @@ use std::time::Instant;
 /// Environment settings shared by the `env` commands.
 #[derive(clap::Args, Clone, Debug)]
 pub struct EnvArgs {
-    /// TOML file with environment settings (sections: scene.*, task, reward, randomization).
+    /// The environment (`fairgrasp env list`).
+    #[arg(long = "env", default_value = fairgrasp_env::ENV_ID)]
+    pub id: String,
+    /// TOML file with the environment's settings (arm tasks: scene.*, control, task, reward,
+    /// randomization, shapes).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Override a setting: `--set task.action_mode=cartesian --set randomization.enabled=true`.
+    /// Override a setting: `--set control.action_mode=cartesian --set randomization.enabled=true`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
 }
 
 impl EnvArgs {
-    pub fn env_config(&self) -> Result<EnvConfig> {
-        Ok(match &self.config {
-            Some(path) => EnvConfig::load(path, &self.overrides)?,
-            None => EnvConfig::with_overrides(&self.overrides)?,
-        })
+    /// The settings table: the file (if any) with the overrides applied, validated.
+    pub fn table(&self) -> Result<toml::Table> {
+        let mut table = match &self.config {
+            Some(path) => read_table(path)?,
+            None => toml::Table::new(),
+        };
+        for item in &self.overrides {
+            apply_override(&mut table, item)?;
+        }
+        registry::validate(&self.id, &table)
+            .with_context(|| format!("invalid settings for {}", self.id))?;
+        Ok(table)
+    }
+
+    /// Builds the environment.
+    pub fn make(&self) -> Result<Box<dyn Env>> {
+        Ok(registry::make(&self.id, &self.table()?)?)
+    }
+
+    /// The grasp task's typed configuration (for the commands only it supports).
+    pub fn grasp_config(&self) -> Result<GraspConfig> {
+        anyhow::ensure!(
+            self.id == fairgrasp_env::ENV_ID,
+            "this command supports {} only, not {}",
+            fairgrasp_env::ENV_ID,
+            self.id
+        );
+        Ok(fairgrasp_env::config::from_table(self.table()?)?)
     }
 }
 
 #[derive(clap::Subcommand)]
 pub enum EnvCommand {
+    /// The registered environments.
+    List,
     /// Verify the Gymnasium contract, determinism and a NaN-free random rollout, for every
     /// observation preset, action mode and reward type, with and without randomisation
     /// (24 variants).
@@ -90,7 +121,14 @@ pub fn run(command: EnvCommand) -> Result<()> {
         EnvCommand::Random(args) => random(&args),
         EnvCommand::Scripted(args) => scripted(&args),
         EnvCommand::Config(args) => {
-            print!("{}", args.env_config()?.to_toml_string());
+            let table = registry::effective_config(&args.id, &args.table()?)?;
+            print!("{}", toml::to_string(&table)?);
+            Ok(())
+        }
+        EnvCommand::List => {
+            for spec in registry::specs() {
+                println!("{:<20} {}", spec.id, spec.summary);
+            }
             Ok(())
         }
     }
@@ -115,43 +153,63 @@ fn print_report(label: &str, report: &CheckReport) {
     }
 }
 
-fn check(args: &CheckArgs) -> Result<()> {
-    let base = args.env.env_config()?;
-    let mut variants = Vec::new();
-    if args.only {
-        variants.push(base.clone());
-    } else {
-        for randomize in [false, true] {
-            for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
-                for mode in [ActionMode::Joint, ActionMode::Cartesian] {
+/// The variants `env check` runs: (label, overrides on top of the user's settings).
+fn variants(id: &str) -> Vec<(String, Vec<String>)> {
+    let mut out = Vec::new();
+    let is_arm = id.starts_with("FaArm");
+    for randomize in [false, true] {
+        for mode in [ActionMode::Joint, ActionMode::Cartesian] {
+            let mut common = vec![
+                format!("randomization.enabled={randomize}"),
+                format!("control.action_mode=\"{}\"", mode_name(mode)),
+            ];
+            if id == fairgrasp_env::ENV_ID {
+                for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
                     for reward in [RewardKind::Sparse, RewardKind::Hybrid, RewardKind::Staged] {
-                        let mut c = base.clone();
-                        c.task.observation = obs;
-                        c.task.action_mode = mode;
-                        c.reward.kind = reward;
-                        c.randomization.enabled = randomize;
-                        variants.push(c);
+                        let mut o = common.clone();
+                        o.push(format!("task.observation=\"{}\"", snake(&format!("{obs:?}"))));
+                        o.push(format!("reward.kind=\"{}\"", snake(&format!("{reward:?}"))));
+                        out.push((o.join(" "), o));
                     }
                 }
+            } else if is_arm {
+                out.push((common.join(" "), std::mem::take(&mut common)));
             }
         }
     }
+    if out.is_empty() {
+        out.push(("defaults".into(), Vec::new()));
+    }
+    out
+}
+
+fn mode_name(mode: ActionMode) -> &'static str {
+    match mode {
+        ActionMode::Joint => "joint",
+        ActionMode::Cartesian => "cartesian",
+    }
+}
+
+fn snake(name: &str) -> String {
+    name.to_lowercase()
+}
+
+fn check(args: &CheckArgs) -> Result<()> {
+    let base = args.env.table()?;
+    let variants = if args.only {
+        vec![("as configured".to_string(), Vec::new())]
+    } else {
+        variants(&args.env.id)
+    };
     let started = Instant::now();
     let mut failures = 0;
-    for config in &variants {
-        let label = format!(
-            "obs={:?} action={:?} reward={:?} randomization={}",
-            config.task.observation,
-            config.task.action_mode,
-            config.reward.kind,
-            if config.randomization.enabled {
-                "on"
-            } else {
-                "off"
-            }
-        );
-        let mut env = GraspEnv::new(config.clone())?;
-        let mut twin = GraspEnv::new(config.clone())?;
+    for (label, overrides) in &variants {
+        let mut table = base.clone();
+        for item in overrides {
+            apply_override(&mut table, item)?;
+        }
+        let mut env = registry::make(&args.env.id, &table)?;
+        let mut twin = registry::make(&args.env.id, &table)?;
         let report = check_env(&mut env, &mut twin, args.steps, args.seed);
         print_report(&label, &report);
         if !report.passed() {
@@ -170,13 +228,12 @@ fn check(args: &CheckArgs) -> Result<()> {
 
 fn random(args: &RandomArgs) -> Result<()> {
     anyhow::ensure!(args.num_envs >= 1, "--num-envs must be at least 1");
-    let config = args.env.env_config()?;
-    let substeps = config.scene.physics.substeps as f64;
+    let make = || args.env.make();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let mut stats = RolloutStats::default();
     let started = Instant::now();
     if args.num_envs == 1 {
-        let mut env = GraspEnv::new(config)?;
+        let mut env = make()?;
         env.reset(Some(args.seed))?;
         let mut episode_return = 0.0f64;
         for _ in 0..args.steps {
@@ -204,8 +261,8 @@ fn random(args: &RandomArgs) -> Result<()> {
         }
     } else {
         let envs = (0..args.num_envs)
-            .map(|_| GraspEnv::new(config.clone()))
-            .collect::<Result<Vec<_>, _>>()?;
+            .map(|_| make())
+            .collect::<Result<Vec<_>>>()?;
         let mut venv = VecEnv::new(envs, args.threads)?;
         venv.reset(Some(args.seed))?;
         let n = venv.num_envs();
@@ -245,10 +302,10 @@ fn random(args: &RandomArgs) -> Result<()> {
     }
     let elapsed = started.elapsed().as_secs_f64();
     println!(
-        "{} random steps in {elapsed:.1} s: {:.0} env steps/s ({:.0} physics steps/s), {} env(s), {} thread(s)",
+        "{} random steps of {} in {elapsed:.1} s: {:.0} env steps/s, {} env(s), {} thread(s)",
         stats.steps,
+        args.env.id,
         stats.steps as f64 / elapsed,
-        stats.steps as f64 * substeps / elapsed,
         args.num_envs,
         if args.num_envs == 1 { 1 } else { args.threads }
     );
@@ -312,8 +369,8 @@ impl RolloutStats {
 
 fn scripted(args: &ScriptedArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    let config = args.env.env_config()?;
-    let mode = config.task.action_mode;
+    let config = args.env.grasp_config()?;
+    let mode = config.control.action_mode;
     let mut env = GraspEnv::new(config)?;
     let started = Instant::now();
     let mut successes = 0;

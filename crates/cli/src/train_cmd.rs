@@ -1,5 +1,5 @@
-//! `fairgrasp train`: PPO or SAC on the grasp task with evaluation, best-model saving,
-//! checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
+//! `fairgrasp train`: PPO or SAC on any registered environment with evaluation, best-model
+//! saving, checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
 
 use anyhow::{Context, Result, bail};
 use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume, train};
@@ -10,6 +10,35 @@ use std::path::{Path, PathBuf};
 /// train` works from any directory).
 pub const PPO_GRASP_TOML: &str = include_str!("../../../configs/ppo_grasp.toml");
 pub const SAC_GRASP_TOML: &str = include_str!("../../../configs/sac_grasp.toml");
+pub const PPO_PICK_PLACE_TOML: &str = include_str!("../../../configs/ppo_pick_place.toml");
+pub const PPO_SORT_TOML: &str = include_str!("../../../configs/ppo_sort.toml");
+
+/// The built-in configuration for an env and algorithm: the tuned file where there is one,
+/// else the algorithm's grasp settings with the env's own defaults.
+pub fn builtin_config(env_id: &str, algo: &str) -> (&'static str, bool) {
+    match (env_id, algo) {
+        ("FaArmPickPlace-v0", "ppo") => (PPO_PICK_PLACE_TOML, true),
+        ("FaArmSort-v0", "ppo") => (PPO_SORT_TOML, true),
+        (fairgrasp_env::ENV_ID, "sac") => (SAC_GRASP_TOML, true),
+        (fairgrasp_env::ENV_ID, _) => (PPO_GRASP_TOML, true),
+        (_, "sac") => (SAC_GRASP_TOML, false),
+        _ => (PPO_GRASP_TOML, false),
+    }
+}
+
+/// `FaArmPickPlace-v0` → `pick_place`, `Pendulum-v1` → `pendulum`: run directory names.
+pub fn short_env_name(env_id: &str) -> String {
+    let stem = env_id.split("-v").next().unwrap_or(env_id);
+    let stem = stem.strip_prefix("FaArm").unwrap_or(stem);
+    let mut out = String::new();
+    for (i, c) in stem.chars().enumerate() {
+        if c.is_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.extend(c.to_lowercase());
+    }
+    out
+}
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -20,6 +49,10 @@ pub struct TrainArgs {
     /// Algorithm: ppo or sac (overrides the config's `algo`).
     #[arg(long, value_parser = ["ppo", "sac"], conflicts_with = "resume")]
     pub algo: Option<String>,
+    /// The environment to learn (`fairgrasp env list`), overriding the config's `env_id`
+    /// [default: FaArmGrasp-v0].
+    #[arg(long, conflicts_with = "resume")]
+    pub env: Option<String>,
     #[arg(long)]
     pub total_timesteps: Option<u64>,
     #[arg(long, conflicts_with = "resume")]
@@ -57,16 +90,28 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     if let Some(algo) = &args.algo {
         overrides.push(format!("algo=\"{algo}\""));
     }
+    if let Some(env) = &args.env {
+        fairgrasp_env::registry::spec(env)?;
+        overrides.push(format!("env_id=\"{env}\""));
+    }
     let (text, origin) = match &args.config {
         Some(path) => (
             std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read {}", path.display()))?,
             format!("invalid config {}", path.display()),
         ),
-        None if args.algo.as_deref() == Some("sac") => {
-            (SAC_GRASP_TOML.to_string(), "invalid settings".into())
+        None => {
+            let env_id = args.env.as_deref().unwrap_or(fairgrasp_env::ENV_ID);
+            let algo = args.algo.as_deref().unwrap_or("ppo");
+            let (text, tuned) = builtin_config(env_id, algo);
+            let mut table: toml::Table = text.parse().context("a built-in config")?;
+            if !tuned {
+                // The grasp file's `[env]` settings are the grasp task's: start from the
+                // env's own defaults.
+                table.remove("env");
+            }
+            (table.to_string(), "invalid settings".into())
         }
-        None => (PPO_GRASP_TOML.to_string(), "invalid settings".into()),
     };
     let config = TrainConfig::from_toml_str(&text, &overrides).context(origin)?;
     let run_dir = match &args.run_dir {
@@ -79,11 +124,15 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             }
             dir.clone()
         }
-        None => next_free_run_dir(Path::new("runs"), config.algo.as_str()),
+        None => next_free_run_dir(
+            Path::new("runs"),
+            &format!("{}_{}", config.algo.as_str(), short_env_name(&config.env_id)),
+        ),
     };
     println!(
-        "training {} for {} steps ({} envs, seed {}) into {}",
+        "training {} on {} for {} steps ({} envs, seed {}) into {}",
         config.algo.as_str(),
+        config.env_id,
         config.total_timesteps,
         config.n_envs,
         config.seed,
@@ -99,15 +148,15 @@ fn holds_a_run(dir: &Path) -> bool {
     dir.join("config.toml").exists() || dir.join("checkpoints").exists()
 }
 
-/// `runs/<algo>_grasp`, or `runs/<algo>_grasp_<n>` with the first free n (like SB3's
+/// `runs/<name>` (e.g. `ppo_grasp`), or `runs/<name>_<n>` with the first free n (like SB3's
 /// `PPO_1`, `PPO_2`, … TensorBoard runs).
-fn next_free_run_dir(root: &Path, algo: &str) -> PathBuf {
-    let first = root.join(format!("{algo}_grasp"));
+fn next_free_run_dir(root: &Path, name: &str) -> PathBuf {
+    let first = root.join(name);
     if !holds_a_run(&first) {
         return first;
     }
     (2..)
-        .map(|n| root.join(format!("{algo}_grasp_{n}")))
+        .map(|n| root.join(format!("{name}_{n}")))
         .find(|dir| !holds_a_run(dir))
         .expect("an unused run directory")
 }
@@ -145,7 +194,7 @@ impl Reporter {
         if let Some(r) = p.ep_rew_mean {
             msg.push_str(&format!(", ep_rew_mean {r:.2}"));
         }
-        if let Some(g) = p.rollout_grasp_rate {
+        if let Some(g) = p.rollout_max_extras.get("grasped") {
             msg.push_str(&format!(", grasp {:.0}%", g * 100.0));
         }
         if let Some(s) = p.rollout_success_rate {

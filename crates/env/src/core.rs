@@ -1,9 +1,10 @@
 //! The environment contract, mirroring Gymnasium's `Env`: `reset(seed) -> (obs, info)`,
 //! `step(action) -> (obs, reward, terminated, truncated, info)`, Box spaces, render modes.
 
-use crate::error::Result;
+use crate::error::Result as EnvResult;
 use crate::spaces::BoxSpace;
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 
 /// How an environment renders (Gymnasium's `render_mode`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -33,75 +34,130 @@ pub enum EpisodeEvent {
     IkFailed,
 }
 
-/// The reward of one step, split into its terms (they sum to the reward).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct RewardTerms {
-    /// Progress towards the object: weight × (previous distance − current distance).
-    pub approach: f32,
-    /// Bonus while the end effector is near the object.
-    pub near: f32,
-    /// One-time bonus when the object is first grasped in the episode.
-    pub grasp: f32,
-    /// One-time bonus for lifting and holding (success).
-    pub lift_hold: f32,
-    /// Per-step time penalty (negative).
-    pub time: f32,
-    /// Penalty when the object leaves the table (negative).
-    pub off_table: f32,
-    /// Sparse reward on success.
-    pub success: f32,
-    /// Staged reward: reaching stage, `(1 − tanh(4·d)) / 3`.
-    pub reach: f32,
-    /// Staged reward: lifting stage while grasped, `min(lift / (min_lift + 1 cm), 1) / 3`.
-    pub lift: f32,
-}
+/// Named scalars in insertion order: a task's own values in [`Info::extras`] and the reward's
+/// terms in [`Info::reward_terms`]. The core never interprets the names, so a new task adds
+/// values without touching it; TensorBoard, the CSV log and Python see them by name. Serialises
+/// as a map (`{"grasped": 1.0, "lift": 0.02}`).
+///
+/// Names are `&'static str` when a task sets them (no allocation per step) and owned strings
+/// when read back from a file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NamedValues(Vec<(Cow<'static, str>, f32)>);
 
-impl RewardTerms {
+impl NamedValues {
+    pub fn new() -> Self {
+        Self(Vec::new())
+    }
+
+    /// Sets `name` to `value`, keeping its position if it is already there.
+    pub fn set(&mut self, name: impl Into<Cow<'static, str>>, value: f32) {
+        let name = name.into();
+        match self.0.iter_mut().find(|(n, _)| *n == name) {
+            Some(entry) => entry.1 = value,
+            None => self.0.push((name, value)),
+        }
+    }
+
+    /// Builder form of [`Self::set`].
+    pub fn with(mut self, name: impl Into<Cow<'static, str>>, value: f32) -> Self {
+        self.set(name, value);
+        self
+    }
+
+    pub fn get(&self, name: &str) -> Option<f32> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
+    }
+
+    /// `get`, with 0 for a missing name.
+    pub fn value(&self, name: &str) -> f32 {
+        self.get(name).unwrap_or(0.0)
+    }
+
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = (&str, f32)> {
+        self.0.iter().map(|(n, v)| (n.as_ref(), *v))
+    }
+
+    pub fn names(&self) -> impl ExactSizeIterator<Item = &str> {
+        self.0.iter().map(|(n, _)| n.as_ref())
+    }
+
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// Sum of the values (a reward's terms sum to the reward).
     pub fn total(&self) -> f32 {
-        self.approach
-            + self.near
-            + self.grasp
-            + self.lift_hold
-            + self.time
-            + self.off_table
-            + self.success
-            + self.reach
-            + self.lift
+        self.0.iter().map(|(_, v)| v).sum()
+    }
+
+    /// Keeps, for every name, the larger of the present and the new value (new names join).
+    pub fn merge_max(&mut self, other: &NamedValues) {
+        for (name, value) in &other.0 {
+            match self.0.iter_mut().find(|(n, _)| n == name) {
+                Some(entry) => entry.1 = entry.1.max(*value),
+                None => self.0.push((name.clone(), *value)),
+            }
+        }
+    }
+
+    pub fn clear(&mut self) {
+        self.0.clear();
     }
 }
 
-/// What `reset` and `step` report besides the observation (Gymnasium's `info` dict).
+impl Serialize for NamedValues {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (name, value) in &self.0 {
+            map.serialize_entry(name.as_ref(), value)?;
+        }
+        map.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for NamedValues {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = NamedValues;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a map of names to numbers")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<NamedValues, A::Error> {
+                let mut out = NamedValues::new();
+                while let Some((name, value)) = map.next_entry::<String, f32>()? {
+                    out.set(name, value);
+                }
+                Ok(out)
+            }
+        }
+        deserializer.deserialize_map(Visitor)
+    }
+}
+
+/// What `reset` and `step` report besides the observation (Gymnasium's `info` dict): what
+/// every environment has, and the task's own values by name.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Info {
-    /// The success rule has held for its consecutive steps (SB3 reads this as `is_success`).
+    /// The task's success rule holds (SB3 reads this as `is_success`).
     pub success: bool,
-    /// The gripper is closed on the object with both pads touching.
-    pub grasped: bool,
-    /// Distance between the end effector (TCP) and the object centre (m).
-    pub ee_object_distance: f32,
-    /// Object lift above its resting height (m).
-    pub lift: f32,
-    /// Consecutive control steps the success rule has held.
-    pub success_streak: u32,
-    /// The reward split into its terms.
-    pub reward_terms: RewardTerms,
     /// Control steps since reset.
     pub elapsed_steps: u32,
     /// Anything unusual this step.
     pub events: Vec<EpisodeEvent>,
-    /// The physical parameters drawn for this episode (domain randomisation).
-    pub episode_params: Option<EpisodeParams>,
-}
-
-/// The randomised quantities of an episode, reported in the reset info.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct EpisodeParams {
-    pub object_size: f32,
-    pub object_mass: f32,
-    pub object_friction: f32,
-    pub arm_damping: Vec<f32>,
-    pub gain_scale: f32,
-    pub latency_steps: u32,
+    /// The task's own values (ManiSkill's `evaluate()` flags: `grasped`, `lift`, …; at reset,
+    /// the episode's randomised parameters as `param/…`).
+    pub extras: NamedValues,
+    /// The reward split into its terms by name; they sum to the reward.
+    pub reward_terms: NamedValues,
 }
 
 /// The result of [`Env::step`].
@@ -134,15 +190,75 @@ pub trait Env: Send {
 
     /// Starts an episode. `Some(seed)` re-seeds the environment's random stream (the same seed
     /// gives the same episode); `None` continues the stream.
-    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, Info)>;
+    fn reset(&mut self, seed: Option<u64>) -> EnvResult<(Vec<f32>, Info)>;
 
     /// Applies one action for one control period. Actions outside the action space are clipped
     /// to it; NaN, infinite or wrong-length actions are errors and change nothing.
-    fn step(&mut self, action: &[f32]) -> Result<Step>;
+    fn step(&mut self, action: &[f32]) -> EnvResult<Step>;
 
     /// Renders in the environment's render mode; `None` when it has none.
-    fn render(&mut self) -> Result<Option<Frame>>;
+    fn render(&mut self) -> EnvResult<Option<Frame>>;
 
     /// Releases resources. The environment must not be used afterwards.
     fn close(&mut self) {}
+}
+
+/// A boxed environment is an environment: what [`crate::registry::make`] returns nests in
+/// wrappers and vector environments like a concrete one.
+impl Env for Box<dyn Env> {
+    fn metadata(&self) -> Metadata {
+        (**self).metadata()
+    }
+
+    fn observation_space(&self) -> &BoxSpace {
+        (**self).observation_space()
+    }
+
+    fn action_space(&self) -> &BoxSpace {
+        (**self).action_space()
+    }
+
+    fn render_mode(&self) -> Option<RenderMode> {
+        (**self).render_mode()
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> EnvResult<(Vec<f32>, Info)> {
+        (**self).reset(seed)
+    }
+
+    fn step(&mut self, action: &[f32]) -> EnvResult<Step> {
+        (**self).step(action)
+    }
+
+    fn render(&mut self) -> EnvResult<Option<Frame>> {
+        (**self).render()
+    }
+
+    fn close(&mut self) {
+        (**self).close()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn named_values_keep_order_replace_by_name_and_round_trip_as_a_map() {
+        let mut v = NamedValues::new().with("reach", 0.25).with("grasp", 0.0);
+        v.set("reach", 0.5);
+        v.set(String::from("lift"), 0.1);
+        assert_eq!(v.names().collect::<Vec<_>>(), ["reach", "grasp", "lift"]);
+        assert_eq!(v.get("reach"), Some(0.5));
+        assert_eq!(v.get("missing"), None);
+        assert!((v.total() - 0.6).abs() < 1e-6);
+        let json = serde_json::to_string(&v).unwrap();
+        assert_eq!(json, r#"{"reach":0.5,"grasp":0.0,"lift":0.1}"#);
+        let back: NamedValues = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, v);
+        let mut m = NamedValues::new().with("lift", 0.3).with("grasped", 0.0);
+        m.merge_max(&v);
+        assert_eq!(m.get("lift"), Some(0.3));
+        assert_eq!(m.get("reach"), Some(0.5));
+    }
 }

@@ -4,8 +4,8 @@
 //! It is privileged (it reads the object pose from the simulator) and plans like the scene's
 //! scripted pick: above the cube, fingers aligned, descend, close, lift, hold.
 
-use crate::config::ActionMode;
-use crate::grasp::GraspEnv;
+use crate::arm::ActionMode;
+use crate::tasks::grasp::GraspEnv;
 use fairgrasp_sim::rapier3d::na::{Isometry3, Translation3, Vector3};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -109,12 +109,13 @@ impl ScriptedGraspPolicy {
         self.advance_commanded();
         let gripper = self.gripper();
         let scene = env.scene();
-        match env.config().task.action_mode {
+        let control = &env.config().control;
+        match control.action_mode {
             ActionMode::Joint => {
-                let max = env.config().task.max_joint_delta;
+                let max = control.max_joint_delta;
                 let current = env
-                    .arm_target()
-                    .map(<[f32]>::to_vec)
+                    .command()
+                    .map(|c| c.arm_target.clone())
                     .unwrap_or_else(|| scene.arm_targets());
                 let desired = scene
                     .solve_ik(&self.commanded, &current)
@@ -136,9 +137,12 @@ impl ScriptedGraspPolicy {
                 action
             }
             ActionMode::Cartesian => {
-                let t = &env.config().task;
+                let t = control;
                 let base = scene.base_pose();
-                let target = env.tcp_target().unwrap_or_else(|| scene.tcp_pose());
+                let target = env
+                    .command()
+                    .map(|c| base * c.tcp_target)
+                    .unwrap_or_else(|| scene.tcp_pose());
                 let delta = base.inverse().rotation
                     * (self.commanded.translation.vector - target.translation.vector);
                 let yaw_error = (self.commanded.rotation * target.rotation.inverse())

@@ -271,7 +271,7 @@ impl<E: Env> Slot<E> {
                 end: None,
             });
         }
-        let episode = self.episode.finish(step.info.success);
+        let episode = self.episode.finish(&step.info);
         let (obs, reset_info) = self
             .reset(index, None, obs_dim)
             .map_err(|e| with_note(e, "(in the automatic reset after its episode ended)"))?;
@@ -294,10 +294,10 @@ impl<E: Env> Slot<E> {
 /// documentation).
 ///
 /// ```no_run
-/// use fairgrasp_env::{EnvConfig, GraspEnv, VecEnv, VectorEnv};
+/// use fairgrasp_env::{GraspConfig, GraspEnv, VecEnv, VectorEnv};
 /// # fn main() -> fairgrasp_env::Result<()> {
 /// let envs = (0..8)
-///     .map(|_| GraspEnv::new(EnvConfig::default()))
+///     .map(|_| GraspEnv::new(GraspConfig::default()))
 ///     .collect::<Result<Vec<_>, _>>()?;
 /// let mut venv = VecEnv::new(envs, 2)?;
 /// venv.reset(Some(42))?;

@@ -1,6 +1,7 @@
 //! The grasp environment's contract: spaces, seeding, clipping, errors, rewards, termination.
 
-use fairgrasp_env::config::{ActionMode, EnvConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::tasks::grasp::{GraspConfig as EnvConfig, ObservationPreset, RewardKind};
 use fairgrasp_env::core::EpisodeEvent;
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::{Env, EnvError, GraspEnv};
@@ -34,7 +35,7 @@ fn scripted_episode(env: &mut GraspEnv, seed: u64) -> (bool, u32, f32) {
 #[test]
 fn scripted_policy_through_step_grasps_in_joint_and_cartesian_mode() {
     for mode in [ActionMode::Joint, ActionMode::Cartesian] {
-        let mut env = env_with(|c| c.task.action_mode = mode);
+        let mut env = env_with(|c| c.control.action_mode = mode);
         let mut successes = 0;
         for seed in 0..20 {
             let (success, steps, total) = scripted_episode(&mut env, 1000 + seed);
@@ -61,7 +62,7 @@ fn spaces_match_the_configured_preset_and_mode() {
     ] {
         let mut env = env_with(|c| {
             c.task.observation = obs;
-            c.task.action_mode = mode;
+            c.control.action_mode = mode;
         });
         assert_eq!(env.observation_space().dim(), dim_obs);
         assert_eq!(env.action_space().dim(), dim_act);
@@ -69,9 +70,9 @@ fn spaces_match_the_configured_preset_and_mode() {
         let (o, info) = env.reset(Some(1)).unwrap();
         assert_eq!(o.len(), dim_obs);
         assert!(env.observation_space().contains(&o));
-        assert!(info.episode_params.is_some());
+        assert!(info.extras.is_empty(), "no randomisation, no parameters: {info:?}");
     }
-    let env = env_with(|c| c.task.max_joint_delta = 0.1);
+    let env = env_with(|c| c.control.max_joint_delta = 0.1);
     assert_eq!(env.action_space().high[0], 0.1);
     assert_eq!(env.action_space().low[6], -1.0);
 }
@@ -129,30 +130,31 @@ fn randomization_varies_the_episode_parameters_within_their_ranges() {
     let mut masses = Vec::new();
     for _ in 0..20 {
         let (_, info) = env.reset(None).unwrap();
-        let p = info.episode_params.unwrap();
-        assert!(p.object_mass >= ranges.object_mass[0] && p.object_mass <= ranges.object_mass[1]);
-        assert!(p.object_size >= ranges.object_size[0] && p.object_size <= ranges.object_size[1]);
-        assert!(p.latency_steps <= ranges.max_latency_steps);
-        assert_eq!(p.arm_damping.len(), 6);
-        assert!(
-            p.arm_damping
-                .iter()
-                .all(|d| *d >= ranges.joint_damping[0] && *d <= ranges.joint_damping[1])
-        );
+        let p = &info.extras;
+        let mass = p.get("param/object0_mass").unwrap();
+        assert!(mass >= ranges.object_mass[0] && mass <= ranges.object_mass[1]);
+        assert!(p.get("param/latency_steps").unwrap() <= ranges.max_latency_steps as f32);
+        for j in 0..6 {
+            let d = p.get(&format!("param/joint_damping_{j}")).unwrap();
+            assert!(d >= ranges.joint_damping[0] && d <= ranges.joint_damping[1]);
+        }
         // The cube really has the drawn size: it rests at half its edge above the table.
-        let rest = env.scene().object_state(0).pose.translation.z - env.scene().table_top() as f64;
-        assert!(
-            (rest - p.object_size as f64 / 2.0).abs() < 2e-3,
-            "rest {rest} size {}",
-            p.object_size
-        );
-        masses.push(p.object_mass);
+        let scene = env.scene();
+        let edge = match &scene.object_config(0).shape {
+            fairgrasp_env::sim::scene::ObjectShape::Box { size } => size[0],
+            other => panic!("{other:?}"),
+        };
+        assert!(edge >= 0.05 * ranges.object_scale[0] - 1e-6);
+        assert!(edge <= 0.05 * ranges.object_scale[1] + 1e-6);
+        let rest = scene.object_state(0).pose.translation.z - scene.table_top() as f64;
+        assert!((rest - edge as f64 / 2.0).abs() < 2e-3, "rest {rest} edge {edge}");
+        masses.push(mass);
     }
     assert!(masses.windows(2).any(|w| w[0] != w[1]));
     let mut plain = env_with(|_| {});
     let (_, info) = plain.reset(Some(1)).unwrap();
-    let p = info.episode_params.unwrap();
-    assert_eq!((p.object_mass, p.latency_steps), (0.1, 0));
+    assert_eq!(info.extras.get("param/object0_mass"), None);
+    assert_eq!(plain.scene().object_config(0).mass, 0.1);
 }
 
 #[test]
@@ -217,19 +219,20 @@ fn hybrid_reward_terms_sum_up_and_one_time_bonuses_are_paid_once() {
     loop {
         let action = policy.act(&env);
         let step = env.step(&action).unwrap();
-        let t = step.info.reward_terms;
+        let t = &step.info.reward_terms;
+        let x = &step.info.extras;
         assert!((t.total() - step.reward).abs() < 1e-6);
-        assert!((t.time + 0.01).abs() < 1e-6);
-        if t.grasp > 0.0 {
+        assert!((t.value("time") + 0.01).abs() < 1e-6);
+        if t.value("grasp") > 0.0 {
             grasp_bonuses += 1;
-            assert!(step.info.grasped);
+            assert_eq!(x.value("grasped"), 1.0);
         }
-        if t.lift_hold > 0.0 {
+        if t.value("lift_hold") > 0.0 {
             lift_bonuses += 1;
             assert!(step.info.success);
         }
-        if step.info.ee_object_distance < 0.1 {
-            assert_eq!(t.near, 0.5);
+        if x.value("ee_object_distance") < 0.1 {
+            assert_eq!(t.value("near"), 0.5);
         }
         if step.terminated || step.truncated {
             assert!(step.info.success && step.terminated);
@@ -266,14 +269,14 @@ fn an_object_that_leaves_the_table_terminates_with_a_penalty() {
     let step = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
     assert!(step.terminated);
     assert!(step.info.events.contains(&EpisodeEvent::ObjectOffTable));
-    assert_eq!(step.info.reward_terms.off_table, -10.0);
+    assert_eq!(step.info.reward_terms.value("off_table"), -10.0);
 }
 
 #[test]
 fn config_errors_name_the_key() {
     for (text, key) in [
-        ("[task]\nmax_joint_delta = 2.0\n", "task.max_joint_delta"),
-        ("[task]\naction_mode = \"teleport\"\n", "teleport"),
+        ("[control]\nmax_joint_delta = 2.0\n", "control.max_joint_delta"),
+        ("[control]\naction_mode = \"teleport\"\n", "teleport"),
         ("[reward]\ngrasp_bonus = 1.0\n", "grasp_bonus"),
         (
             "[randomization]\nobject_mass = [0.3, 0.1]\n",
@@ -288,17 +291,17 @@ fn config_errors_name_the_key() {
         let err = EnvConfig::from_toml_str(text, &[]).unwrap_err().to_string();
         assert!(err.contains(key), "{text}: {err}");
     }
-    let err = EnvConfig::with_overrides(&["task.max_episode_stepz=3".into()])
+    let err = EnvConfig::from_toml_str("", &["task.max_episode_stepz=3".into()])
         .unwrap_err()
         .to_string();
     assert!(err.contains("max_episode_stepz"), "{err}");
-    let c = EnvConfig::with_overrides(&[
-        "task.action_mode=cartesian".into(),
+    let c = EnvConfig::from_toml_str("", &[
+        "control.action_mode=cartesian".into(),
         "randomization.enabled=true".into(),
         "scene.physics.substeps=4".into(),
     ])
     .unwrap();
-    assert_eq!(c.task.action_mode, ActionMode::Cartesian);
+    assert_eq!(c.control.action_mode, ActionMode::Cartesian);
     assert!(c.randomization.enabled);
     assert_eq!(c.scene.physics.substeps, 4);
     // A saved configuration loads back unchanged.
@@ -322,7 +325,8 @@ fn ansi_rendering_describes_the_state() {
 #[test]
 fn the_documented_env_config_is_the_default() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/env.toml");
-    assert_eq!(EnvConfig::load(&path, &[]).unwrap(), EnvConfig::default());
+    let text = std::fs::read_to_string(path).unwrap();
+    assert_eq!(EnvConfig::from_toml_str(&text, &[]).unwrap(), EnvConfig::default());
 }
 
 #[test]
@@ -334,17 +338,17 @@ fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages()
     let mut best_before_success = f32::MIN;
     loop {
         let step = env.step(&policy.act(&env)).unwrap();
-        let t = step.info.reward_terms;
+        let t = &step.info.reward_terms;
         assert!((t.total() - step.reward).abs() < 1e-6);
         first.get_or_insert(step.reward);
         if step.terminated || step.truncated {
             assert!(step.info.success);
-            assert_eq!(t.success, 10.0);
+            assert_eq!(t.value("success"), 10.0);
             break;
         }
         assert!(step.reward <= 0.0 && step.reward >= -1.0, "{}", step.reward);
-        if step.info.grasped {
-            assert!(t.grasp > 0.0);
+        if step.info.extras.value("grasped") > 0.0 {
+            assert!(t.value("grasp") > 0.0);
         }
         best_before_success = best_before_success.max(step.reward);
     }
@@ -361,5 +365,5 @@ fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages()
     env.reset(Some(2)).unwrap();
     let step = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
     assert!(step.terminated);
-    assert_eq!(step.info.reward_terms.off_table, -99.0);
+    assert_eq!(step.info.reward_terms.value("off_table"), -99.0);
 }

@@ -1,7 +1,7 @@
 //! VecEnv: determinism across thread counts, automatic resets, agreement with single
 //! environments, errors that name the environment.
 
-use fairgrasp_env::config::ActionMode;
+use fairgrasp_env::arm::ActionMode;
 use fairgrasp_env::core::{Frame, Metadata, RenderMode};
 use fairgrasp_env::spaces::BoxSpace;
 use fairgrasp_env::{
@@ -186,7 +186,6 @@ fn auto_reset_keeps_the_terminal_observation_and_starts_a_fresh_episode() {
         let end = step.episode_ends[i].as_ref().unwrap();
         assert_eq!(end.episode.length, 5);
         assert_eq!(end.reset_info.elapsed_steps, 0);
-        assert!(end.reset_info.episode_params.is_some(), "a reset info");
         assert_ne!(bits(&end.terminal_observation), bits(step.obs(i)));
     }
     // Env 1: terminal observation and the next episode's first observation, as by hand.
@@ -271,7 +270,7 @@ fn construction_checks_the_environments() {
     assert!(e.to_string().contains("at least one"), "{e}");
     let joint = EnvConfig::default();
     let mut cartesian = EnvConfig::default();
-    cartesian.task.action_mode = ActionMode::Cartesian;
+    cartesian.control.action_mode = ActionMode::Cartesian;
     let envs = vec![
         GraspEnv::new(joint.clone()).unwrap(),
         GraspEnv::new(joint).unwrap(),

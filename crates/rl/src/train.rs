@@ -18,7 +18,7 @@ use crate::save_util::write_atomic;
 use fairgrasp_env::wrappers::{
     EpisodeStats, RescaleAction, VecNormalize, VecNormalizeConfig, VecNormalizeState,
 };
-use fairgrasp_env::{Env, EnvConfig, GraspEnv, VecEnv, VectorEnv};
+use fairgrasp_env::{Env, NamedValues, VecEnv, VectorEnv, registry};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -75,6 +75,8 @@ pub const HELD_OUT_SEED_BASE: u64 = 2_000_000_000;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
+    /// The registered environment to learn (`fairgrasp env list`).
+    pub env_id: String,
     pub algo: Algo,
     pub total_timesteps: u64,
     pub seed: u64,
@@ -90,12 +92,14 @@ pub struct TrainConfig {
     pub eval: EvalConfig,
     pub ppo: PpoConfig,
     pub sac: SacConfig,
-    pub env: EnvConfig,
+    /// The environment's own settings (its TOML table; missing keys take their defaults).
+    pub env: toml::Table,
 }
 
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
+            env_id: fairgrasp_env::ENV_ID.into(),
             algo: Algo::Ppo,
             total_timesteps: 2_000_000,
             seed: 42,
@@ -107,7 +111,7 @@ impl Default for TrainConfig {
             eval: EvalConfig::default(),
             ppo: PpoConfig::default(),
             sac: SacConfig::default(),
-            env: EnvConfig::default(),
+            env: toml::Table::new(),
         }
     }
 }
@@ -164,7 +168,13 @@ impl TrainConfig {
                 key: "normalize".into(),
                 problem,
             })?;
-        self.env.validate()?;
+        registry::validate(&self.env_id, &self.env).map_err(|e| match e {
+            fairgrasp_env::EnvError::Config { key, problem } => RlError::Config {
+                key: format!("env.{key}"),
+                problem: format!("{problem} ({})", self.env_id),
+            },
+            other => other.into(),
+        })?;
         Ok(())
     }
 }
@@ -176,18 +186,25 @@ pub struct EvalResult {
     pub mean_return: f32,
     pub mean_length: f32,
     pub episodes: u32,
+    /// The mean over episodes of each of the task's extras at the final step
+    /// (`fraction_sorted`, `lift`, …).
+    #[serde(default)]
+    pub final_extras: NamedValues,
 }
 
-/// Runs a deterministic policy on fresh grasp environments with seeds `seed, seed+1, …`;
-/// `policy` maps one raw observation to one action (it normalises, if the model does).
+/// Runs a deterministic policy on fresh environments `env_id` (built through the registry from
+/// `env_config`) with seeds `seed, seed+1, …`; `policy` maps one raw observation to one action
+/// (it normalises, if the model does).
 pub fn evaluate(
     policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
-    env_config: &EnvConfig,
+    env_id: &str,
+    env_config: &toml::Table,
     episodes: u32,
     seed: u64,
 ) -> Result<EvalResult> {
-    let mut env = RescaleAction::new(GraspEnv::new(env_config.clone())?)?;
+    let mut env = RescaleAction::new(registry::make(env_id, env_config)?)?;
     let (mut successes, mut total_return, mut total_length) = (0u32, 0.0f32, 0u64);
+    let mut extras_sum = NamedValues::new();
     for e in 0..episodes as u64 {
         let (mut obs, _) = env.reset(Some(seed + e))?;
         loop {
@@ -199,16 +216,25 @@ pub fn evaluate(
             if step.terminated || step.truncated {
                 successes += step.info.success as u32;
                 total_length += step.info.elapsed_steps as u64;
+                for (name, value) in step.info.extras.iter() {
+                    let sum = extras_sum.value(name) + value;
+                    extras_sum.set(name.to_string(), sum);
+                }
                 break;
             }
         }
     }
     let n = episodes.max(1) as f32;
+    let mut final_extras = NamedValues::new();
+    for (name, sum) in extras_sum.iter() {
+        final_extras.set(name.to_string(), sum / n);
+    }
     Ok(EvalResult {
         success_rate: successes as f32 / n,
         mean_return: total_return / n,
         mean_length: total_length as f32 / n,
         episodes,
+        final_extras,
     })
 }
 
@@ -221,10 +247,9 @@ pub struct Progress {
     pub fps: f64,
     pub ep_rew_mean: Option<f32>,
     pub rollout_success_rate: Option<f32>,
-    /// Share of recent episodes in which the gripper closed on the object.
-    pub rollout_grasp_rate: Option<f32>,
-    /// Mean over recent episodes of the highest lift reached (m).
-    pub rollout_max_lift: Option<f32>,
+    /// For each of the task's extras, the mean over recent episodes of its largest value in
+    /// the episode (`grasped`: the share of episodes with a grasp; `lift`: the mean peak lift).
+    pub rollout_max_extras: NamedValues,
     pub last_eval: Option<EvalResult>,
     /// Evaluations run so far (in this session).
     pub eval_count: usize,
@@ -351,7 +376,7 @@ fn dispatch(
     on_progress: impl FnMut(&Progress),
 ) -> Result<TrainSummary> {
     let envs = (0..config.n_envs)
-        .map(|_| GraspEnv::new(config.env.clone()).and_then(RescaleAction::new))
+        .map(|_| registry::make(&config.env_id, &config.env).and_then(RescaleAction::new))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     let venv = VecNormalize::new(VecEnv::new(envs, config.threads)?, config.normalize.clone())?;
     let (obs_dim, act_dim) = (venv.obs_dim(), venv.act_dim());
@@ -384,7 +409,7 @@ fn run<A: Algorithm>(
     config: &TrainConfig,
     run_dir: &Path,
     mut algo: A,
-    mut venv: VecNormalize<VecEnv<RescaleAction<GraspEnv>>>,
+    mut venv: VecNormalize<VecEnv<RescaleAction<Box<dyn Env>>>>,
     checkpoint: Option<PathBuf>,
     mut on_progress: impl FnMut(&Progress),
 ) -> Result<TrainSummary> {
@@ -462,7 +487,7 @@ fn run<A: Algorithm>(
                 if recent.len() == 100 {
                     recent.pop_front();
                 }
-                recent.push_back(end.episode);
+                recent.push_back(end.episode.clone());
             }
         };
         let train_scalars = algo.learn_iteration(&mut venv, remaining, &mut on_step)?;
@@ -475,8 +500,17 @@ fn run<A: Algorithm>(
             let mean = |f: fn(&EpisodeStats) -> f32| recent.iter().map(f).sum::<f32>() / n;
             progress.ep_rew_mean = Some(mean(|e| e.episode_return as f32));
             progress.rollout_success_rate = Some(mean(|e| e.success as u8 as f32));
-            progress.rollout_grasp_rate = Some(mean(|e| e.grasped as u8 as f32));
-            progress.rollout_max_lift = Some(mean(|e| e.max_lift));
+            let mut sums = NamedValues::new();
+            for e in &recent {
+                for (name, value) in e.max_extras.iter() {
+                    let sum = sums.value(name) + value;
+                    sums.set(name.to_string(), sum);
+                }
+            }
+            progress.rollout_max_extras.clear();
+            for (name, sum) in sums.iter() {
+                progress.rollout_max_extras.set(name.to_string(), sum / n);
+            }
         }
         if !train_scalars.is_empty() && steps - last_log >= log_every {
             last_log = steps;
@@ -503,17 +537,27 @@ fn run<A: Algorithm>(
             };
             let result = evaluate(
                 &mut policy,
+                &config.env_id,
                 &config.env,
                 config.eval.episodes,
                 EVAL_SEED_BASE,
             )?;
-            let scalars = [
-                ("eval/success_rate", result.success_rate),
-                ("eval/mean_reward", result.mean_return),
-                ("eval/mean_ep_length", result.mean_length),
+            let mut scalars: Vec<(String, f32)> = vec![
+                ("eval/success_rate".into(), result.success_rate),
+                ("eval/mean_reward".into(), result.mean_return),
+                ("eval/mean_ep_length".into(), result.mean_length),
             ];
+            scalars.extend(
+                result
+                    .final_extras
+                    .iter()
+                    .map(|(name, v)| (format!("eval/{name}"), v)),
+            );
             tb.add_scalars(steps, &scalars).map_err(io)?;
-            let mut row: Vec<(&str, f64)> = scalars.iter().map(|(k, v)| (*k, *v as f64)).collect();
+            let mut row: Vec<(&str, f64)> = scalars
+                .iter()
+                .map(|(k, v)| (k.as_str(), *v as f64))
+                .collect();
             row.push(("time/total_timesteps", steps as f64));
             row.push((
                 "time/time_elapsed",
@@ -544,7 +588,7 @@ fn run<A: Algorithm>(
                 next_checkpoint,
                 best: best.clone(),
                 elapsed_seconds: elapsed_before + started.elapsed().as_secs_f64(),
-                recent_episodes: recent.iter().copied().collect(),
+                recent_episodes: recent.iter().cloned().collect(),
                 normalization: venv.state().to_json(),
             };
             write_checkpoint(run_dir, &algo, &meta(&algo, &venv), &state)?;
@@ -636,23 +680,26 @@ fn log_iteration(
     elapsed: f64,
     train_scalars: &[(&'static str, f32)],
 ) -> std::io::Result<()> {
-    let mut scalars = train_scalars.to_vec();
-    scalars.push(("time/fps", p.fps as f32));
-    scalars.push(("time/time_elapsed", elapsed as f32));
+    let mut scalars: Vec<(String, f32)> = train_scalars
+        .iter()
+        .map(|(k, v)| (k.to_string(), *v))
+        .collect();
+    scalars.push(("time/fps".into(), p.fps as f32));
+    scalars.push(("time/time_elapsed".into(), elapsed as f32));
     if let Some(r) = p.ep_rew_mean {
-        scalars.push(("rollout/ep_rew_mean", r));
+        scalars.push(("rollout/ep_rew_mean".into(), r));
     }
     if let Some(r) = p.rollout_success_rate {
-        scalars.push(("rollout/success_rate", r));
+        scalars.push(("rollout/success_rate".into(), r));
     }
-    if let Some(r) = p.rollout_grasp_rate {
-        scalars.push(("rollout/grasp_rate", r));
-    }
-    if let Some(r) = p.rollout_max_lift {
-        scalars.push(("rollout/max_lift", r));
+    for (name, value) in p.rollout_max_extras.iter() {
+        scalars.push((format!("rollout/max_{name}"), value));
     }
     tb.add_scalars(p.num_timesteps, &scalars)?;
-    let mut row: Vec<(&str, f64)> = scalars.iter().map(|(k, v)| (*k, *v as f64)).collect();
+    let mut row: Vec<(&str, f64)> = scalars
+        .iter()
+        .map(|(k, v)| (k.as_str(), *v as f64))
+        .collect();
     row.push(("time/total_timesteps", p.num_timesteps as f64));
     csv.write_row(&row)
 }

@@ -1,6 +1,6 @@
 //! [`RecordEpisodeStatistics`]: episode return, length and success.
 
-use crate::core::{Env, Frame, Info, Metadata, RenderMode, Step};
+use crate::core::{Env, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::Result;
 use crate::spaces::BoxSpace;
 use serde::{Deserialize, Serialize};
@@ -9,7 +9,7 @@ use std::collections::VecDeque;
 /// The statistics of one finished episode: Gymnasium's `info["episode"]` (`r`, `l`) and SB3
 /// `Monitor`'s, with SB3's `is_success`. Wall-clock time (`t`) is left out so that results stay
 /// reproducible.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeStats {
     /// Sum of the episode's rewards (accumulated in f64).
     #[serde(rename = "r")]
@@ -20,10 +20,13 @@ pub struct EpisodeStats {
     /// [`Info::success`] of the episode's final step (SB3's `info["is_success"]`).
     #[serde(rename = "is_success")]
     pub success: bool,
-    /// The gripper closed on the object at some step ([`Info::grasped`]).
-    pub grasped: bool,
-    /// Highest object lift reached (m, [`Info::lift`]).
-    pub max_lift: f32,
+    /// Each of the task's [`Info::extras`] at its largest over the episode: a flag that was
+    /// ever raised reads 1 (`grasped`), a height its peak (`lift`).
+    #[serde(default)]
+    pub max_extras: NamedValues,
+    /// The task's extras at the episode's final step (`objects_sorted` at the end).
+    #[serde(default)]
+    pub final_extras: NamedValues,
 }
 
 /// Accumulates the current episode (shared with [`crate::vector::VecEnv`]).
@@ -31,26 +34,24 @@ pub struct EpisodeStats {
 pub(crate) struct EpisodeAccumulator {
     episode_return: f64,
     length: u32,
-    grasped: bool,
-    max_lift: f32,
+    max_extras: NamedValues,
 }
 
 impl EpisodeAccumulator {
     pub(crate) fn add(&mut self, reward: f32, info: &Info) {
         self.episode_return += reward as f64;
         self.length += 1;
-        self.grasped |= info.grasped;
-        self.max_lift = self.max_lift.max(info.lift);
+        self.max_extras.merge_max(&info.extras);
     }
 
-    /// The finished episode's statistics; starts a new episode.
-    pub(crate) fn finish(&mut self, success: bool) -> EpisodeStats {
+    /// The finished episode's statistics, given its final step's info; starts a new episode.
+    pub(crate) fn finish(&mut self, last: &Info) -> EpisodeStats {
         let stats = EpisodeStats {
             episode_return: self.episode_return,
             length: self.length,
-            success,
-            grasped: self.grasped,
-            max_lift: self.max_lift,
+            success: last.success,
+            max_extras: std::mem::take(&mut self.max_extras),
+            final_extras: last.extras.clone(),
         };
         *self = Self::default();
         stats
@@ -159,8 +160,8 @@ impl<E: Env> Env for RecordEpisodeStatistics<E> {
         self.current.add(step.reward, &step.info);
         self.last = None;
         if step.terminated || step.truncated {
-            let stats = self.current.finish(step.info.success);
-            self.last = Some(stats);
+            let stats = self.current.finish(&step.info);
+            self.last = Some(stats.clone());
             self.episode_count += 1;
             if self.buffer_length > 0 {
                 if self.recent.len() == self.buffer_length {

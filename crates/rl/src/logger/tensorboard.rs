@@ -118,11 +118,12 @@ impl TensorBoardWriter {
     }
 
     /// Writes scalars (tag, value) at a global step.
-    pub fn add_scalars(&mut self, step: u64, values: &[(&str, f32)]) -> io::Result<()> {
+    pub fn add_scalars<S: AsRef<str>>(&mut self, step: u64, values: &[(S, f32)]) -> io::Result<()> {
         if values.is_empty() {
             return Ok(());
         }
-        let event = encode_event(now(), step as i64, EventBody::Scalars(values));
+        let values: Vec<(&str, f32)> = values.iter().map(|(k, v)| (k.as_ref(), *v)).collect();
+        let event = encode_event(now(), step as i64, EventBody::Scalars(&values));
         self.write_record(&event)
     }
 

@@ -1,0 +1,256 @@
+//! The configuration every arm task shares — scene, control, randomisation, object shapes —
+//! around the task's own `[task]` and `[reward]` sections.
+
+use crate::arm::control::ControlConfig;
+use crate::config::{check_non_negative, check_range};
+use crate::core::RenderMode;
+use crate::error::{EnvError, Result};
+use fairgrasp_sim::scene::SceneConfig;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use std::fmt::Debug;
+use std::path::PathBuf;
+
+/// What the shared arm environment needs from a task's `[task]` section.
+pub trait TaskSettings:
+    Clone + Debug + Default + PartialEq + Serialize + DeserializeOwned + Send + 'static
+{
+    /// Control steps before the episode is truncated.
+    fn max_episode_steps(&self) -> u32;
+    fn render_mode(&self) -> Option<RenderMode>;
+    /// Checks ranges; errors name the key (`task.…`).
+    fn validate(&self) -> Result<()>;
+}
+
+/// What the shared arm environment needs from a task's `[reward]` section.
+pub trait RewardSettings:
+    Clone + Debug + Default + PartialEq + Serialize + DeserializeOwned + Send + 'static
+{
+    /// Checks ranges; errors name the key (`reward.…`).
+    fn validate(&self) -> Result<()>;
+}
+
+/// Standard deviations of the Gaussian noise added to each observation group, every step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObservationNoise {
+    /// rad
+    pub joint_position: f32,
+    /// rad/s
+    pub joint_velocity: f32,
+    /// m
+    pub ee_position: f32,
+    /// rad (Euler angles) or unitless (rotation-matrix entries)
+    pub ee_orientation: f32,
+    /// m/s
+    pub ee_velocity: f32,
+    /// m
+    pub object_position: f32,
+    /// unitless (quaternion / rotation features)
+    pub object_orientation: f32,
+    /// m
+    pub gripper_opening: f32,
+}
+
+impl Default for ObservationNoise {
+    fn default() -> Self {
+        Self {
+            joint_position: 0.002,
+            joint_velocity: 0.02,
+            ee_position: 0.002,
+            ee_orientation: 0.01,
+            ee_velocity: 0.01,
+            object_position: 0.005,
+            object_orientation: 0.02,
+            gripper_opening: 0.001,
+        }
+    }
+}
+
+/// Domain randomisation. Ranges are sampled uniformly at every reset; noise every step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RandomizationConfig {
+    /// Master switch.
+    pub enabled: bool,
+    /// kg, every object.
+    pub object_mass: [f32; 2],
+    pub object_friction: [f32; 2],
+    /// Factor on every dimension of each object's shape (a 5 cm cube with [0.9, 1.1] has
+    /// edges of 4.5–5.5 cm).
+    pub object_scale: [f32; 2],
+    /// Viscous damping of each arm joint (N·m·s/rad).
+    pub joint_damping: [f32; 2],
+    /// Factor on the arm's PD gains.
+    pub actuator_gain_scale: [f32; 2],
+    /// Actions reach the robot 0…N control steps late (N drawn per episode).
+    pub max_latency_steps: u32,
+    /// Uniform offset added to each home joint angle (± rad).
+    pub initial_joint_jitter: f32,
+    pub observation_noise: ObservationNoise,
+}
+
+impl Default for RandomizationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            object_mass: [0.05, 0.2],
+            object_friction: [0.5, 1.5],
+            object_scale: [0.9, 1.1],
+            joint_damping: [0.1, 1.0],
+            actuator_gain_scale: [0.8, 1.2],
+            max_latency_steps: 2,
+            initial_joint_jitter: 0.05,
+            observation_noise: ObservationNoise::default(),
+        }
+    }
+}
+
+impl RandomizationConfig {
+    pub fn validate(&self) -> Result<()> {
+        check_range("randomization.object_mass", self.object_mass, 0.001, 5.0)?;
+        check_range("randomization.object_friction", self.object_friction, 0.0, 5.0)?;
+        check_range("randomization.object_scale", self.object_scale, 0.2, 2.0)?;
+        check_range("randomization.joint_damping", self.joint_damping, 0.0, 100.0)?;
+        check_range(
+            "randomization.actuator_gain_scale",
+            self.actuator_gain_scale,
+            0.05,
+            20.0,
+        )?;
+        if self.max_latency_steps > 10 {
+            return Err(EnvError::config(
+                "randomization.max_latency_steps",
+                "must be at most 10",
+            ));
+        }
+        check_non_negative(
+            "randomization.initial_joint_jitter",
+            self.initial_joint_jitter,
+        )?;
+        let n = &self.observation_noise;
+        for (key, v) in [
+            ("joint_position", n.joint_position),
+            ("joint_velocity", n.joint_velocity),
+            ("ee_position", n.ee_position),
+            ("ee_orientation", n.ee_orientation),
+            ("ee_velocity", n.ee_velocity),
+            ("object_position", n.object_position),
+            ("object_orientation", n.object_orientation),
+            ("gripper_opening", n.gripper_opening),
+        ] {
+            check_non_negative(&format!("randomization.observation_noise.{key}"), v)?;
+        }
+        Ok(())
+    }
+}
+
+/// A kind of object shape drawn by [`ShapesConfig`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeKind {
+    Box,
+    Cylinder,
+    Sphere,
+    Mesh,
+}
+
+/// Random object shapes (the design's "random object shapes"): when enabled, every object gets
+/// a new shape at each reset, its kind uniform among `kinds`. Part of the task's distribution,
+/// independent of the domain-randomisation switch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ShapesConfig {
+    pub enabled: bool,
+    pub kinds: Vec<ShapeKind>,
+    /// Each side of a box (m).
+    pub box_side: [f32; 2],
+    pub cylinder_radius: [f32; 2],
+    pub cylinder_height: [f32; 2],
+    pub sphere_radius: [f32; 2],
+    /// STL or OBJ files drawn from for the `mesh` kind.
+    pub meshes: Vec<PathBuf>,
+    /// Factor on a mesh's own units.
+    pub mesh_scale: [f32; 2],
+}
+
+impl Default for ShapesConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            kinds: vec![ShapeKind::Box, ShapeKind::Cylinder],
+            box_side: [0.03, 0.07],
+            cylinder_radius: [0.015, 0.03],
+            cylinder_height: [0.04, 0.08],
+            sphere_radius: [0.02, 0.03],
+            meshes: Vec::new(),
+            mesh_scale: [1.0, 1.0],
+        }
+    }
+}
+
+impl ShapesConfig {
+    pub fn validate(&self) -> Result<()> {
+        if !self.enabled {
+            return Ok(());
+        }
+        if self.kinds.is_empty() {
+            return Err(EnvError::config("shapes.kinds", "name at least one kind"));
+        }
+        // The gripper opens 90 mm: keep every graspable width below 85 mm.
+        check_range("shapes.box_side", self.box_side, 0.01, 0.085)?;
+        check_range("shapes.cylinder_radius", self.cylinder_radius, 0.005, 0.0425)?;
+        check_range("shapes.cylinder_height", self.cylinder_height, 0.01, 0.2)?;
+        check_range("shapes.sphere_radius", self.sphere_radius, 0.005, 0.0425)?;
+        check_range("shapes.mesh_scale", self.mesh_scale, 0.001, 1000.0)?;
+        if self.kinds.contains(&ShapeKind::Mesh) && self.meshes.is_empty() {
+            return Err(EnvError::config(
+                "shapes.meshes",
+                "the `mesh` kind needs at least one STL or OBJ file",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Everything that defines an arm environment: the shared sections and the task's `T` (`[task]`)
+/// and `R` (`[reward]`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default, bound = "T: TaskSettings, R: RewardSettings")]
+pub struct ArmEnvConfig<T, R> {
+    pub scene: SceneConfig,
+    pub control: ControlConfig,
+    pub task: T,
+    pub reward: R,
+    pub randomization: RandomizationConfig,
+    pub shapes: ShapesConfig,
+}
+
+impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
+    /// Checks every range; the error names the key.
+    pub fn validate(&self) -> Result<()> {
+        self.scene.validate().map_err(|e| match e {
+            fairgrasp_sim::SimError::Config { key, problem } => {
+                EnvError::config(format!("scene.{key}"), problem)
+            }
+            other => EnvError::Sim(other),
+        })?;
+        self.control.validate()?;
+        self.task.validate()?;
+        self.reward.validate()?;
+        self.randomization.validate()?;
+        self.shapes.validate()
+    }
+
+    /// Parses TOML text, applies `overrides` (`dotted.key=value`), then validates.
+    pub fn from_toml_str(text: &str, overrides: &[String]) -> Result<Self> {
+        let config: Self = crate::config::parse_toml(text, overrides)?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The configuration as TOML text (e.g. to save it beside a run).
+    pub fn to_toml_string(&self) -> String {
+        toml::to_string(self).unwrap_or_else(|e| format!("# could not serialise: {e}\n"))
+    }
+}

@@ -1,0 +1,450 @@
+//! The shared base of every arm task (ManiSkill's `BaseEnv`): the simulated FR5 with its
+//! gripper, the action mapping, control latency, domain randomisation, observation noise, time
+//! limits and the Gymnasium contract. A task ([`Task`]) only places its objects, writes its
+//! observation, evaluates its flags and pays its reward.
+//!
+//! - [`state`]: [`ArmState`], the plain state observations are computed from;
+//! - [`control`]: [`ActionMapper`], action → joint targets;
+//! - [`observation`]: [`ObsWriter`] and noise groups;
+//! - [`config`]: [`ArmEnvConfig`], the shared configuration sections.
+
+pub mod config;
+pub mod control;
+pub mod observation;
+pub mod state;
+
+pub use config::{
+    ArmEnvConfig, ObservationNoise, RandomizationConfig, RewardSettings, ShapeKind, ShapesConfig,
+    TaskSettings,
+};
+pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
+pub use observation::{NoiseGroup, ObsWriter};
+pub use state::{ArmState, ObjectReading};
+
+use crate::core::{Env, EpisodeEvent, Frame, Info, Metadata, NamedValues, RenderMode, Step};
+use crate::error::{EnvError, Result};
+use crate::spaces::BoxSpace;
+use fairgrasp_sim::SimError;
+use fairgrasp_sim::kinematics::SerialChain;
+use fairgrasp_sim::scene::{ObjectShape, PhysicalParams, Scene, SceneConfig};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::VecDeque;
+use std::ops::Range;
+
+/// What a task's evaluation of one step found (ManiSkill's `evaluate()`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Evaluation {
+    /// The success rule holds: the episode terminates.
+    pub success: bool,
+    /// The task failed for good (e.g. an object fell off the table): the episode terminates.
+    pub failure: Option<EpisodeEvent>,
+    /// The task's flags and measures, reported in [`Info::extras`].
+    pub extras: NamedValues,
+}
+
+/// A task on the shared arm environment. One small type per task (see [`crate::tasks`]).
+pub trait Task: Send + Sized + 'static {
+    /// The `[task]` section.
+    type Settings: TaskSettings;
+    /// The `[reward]` section.
+    type Reward: RewardSettings;
+    /// The registered id (`FaArmGrasp-v0`).
+    const ID: &'static str;
+
+    /// Adjusts the scene before it is built (objects, bins).
+    fn configure_scene(
+        _config: &ArmEnvConfig<Self::Settings, Self::Reward>,
+        _scene: &mut SceneConfig,
+    ) -> Result<()> {
+        Ok(())
+    }
+
+    /// The task for a built scene; checks that the scene suits it.
+    fn new(config: &ArmEnvConfig<Self::Settings, Self::Reward>, scene: &Scene) -> Result<Self>;
+
+    /// Starts an episode: the arm is at home with this episode's physical parameters and object
+    /// shapes; place the objects, draw goals, settle the scene.
+    fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()>;
+
+    /// Writes the observation. `previous_action` is normalised to [-1, 1].
+    fn observe(&self, state: &ArmState, previous_action: &[f32], out: &mut ObsWriter);
+
+    /// Evaluates the step just taken.
+    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation;
+
+    /// The reward of the step just taken, by term. `steps_left` counts the control steps left
+    /// before the time limit.
+    fn reward(&mut self, evaluation: &Evaluation, state: &ArmState, steps_left: u32)
+    -> NamedValues;
+
+    /// A line describing the task's state, for the `ansi` render mode.
+    fn describe(&self, _state: &ArmState) -> String {
+        String::new()
+    }
+}
+
+/// State that lives for one episode.
+#[derive(Clone, Debug)]
+struct Episode {
+    steps: u32,
+    done: bool,
+    command: Command,
+    /// Actions waiting to reach the robot (control latency).
+    pending: VecDeque<Vec<f32>>,
+    state: ArmState,
+    last_obs: Vec<f32>,
+}
+
+/// An arm task as a Gymnasium-style environment.
+pub struct ArmEnv<T: Task> {
+    config: ArmEnvConfig<T::Settings, T::Reward>,
+    scene: Scene,
+    task: T,
+    mapper: ActionMapper,
+    rng: ChaCha8Rng,
+    observation_space: BoxSpace,
+    action_space: BoxSpace,
+    noise_groups: Vec<(Range<usize>, NoiseGroup)>,
+    /// The nominal shape of each object (before shape randomisation and scaling).
+    nominal_shapes: Vec<ObjectShape>,
+    episode: Option<Episode>,
+}
+
+fn gaussian(rng: &mut impl Rng) -> f32 {
+    let u1: f32 = rng.random::<f32>().max(1e-12);
+    let u2: f32 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
+}
+
+pub(crate) fn uniform(rng: &mut impl Rng, range: [f32; 2]) -> f32 {
+    range[0] + (range[1] - range[0]) * rng.random::<f32>()
+}
+
+impl<T: Task> ArmEnv<T> {
+    /// Builds the environment. Call [`Env::reset`] before stepping.
+    pub fn new(config: ArmEnvConfig<T::Settings, T::Reward>) -> Result<Self> {
+        config.validate()?;
+        let mut scene_config = config.scene.clone();
+        T::configure_scene(&config, &mut scene_config)?;
+        let scene = Scene::new(scene_config)?;
+        let chain = SerialChain::new(&scene.robot().model, "tcp")?;
+        let mapper = ActionMapper::new(config.control.clone(), chain, scene.arm_limits())?;
+        let task = T::new(&config, &scene)?;
+        let action_space = mapper.action_space();
+        // Write one observation to learn its length and noise groups.
+        let state = ArmState::from_scene(&scene);
+        let (mut obs, mut noise_groups) = (Vec::new(), Vec::new());
+        let zeros = vec![0.0; action_space.dim()];
+        task.observe(
+            &state,
+            &zeros,
+            &mut ObsWriter::recording(&mut obs, &mut noise_groups),
+        );
+        let nominal_shapes = (0..scene.num_objects())
+            .map(|i| scene.object_config(i).shape.clone())
+            .collect();
+        Ok(Self {
+            observation_space: BoxSpace::unbounded(obs.len()),
+            noise_groups,
+            action_space,
+            mapper,
+            task,
+            nominal_shapes,
+            rng: ChaCha8Rng::seed_from_u64(0),
+            scene,
+            config,
+            episode: None,
+        })
+    }
+
+    pub fn config(&self) -> &ArmEnvConfig<T::Settings, T::Reward> {
+        &self.config
+    }
+
+    /// The simulation behind the environment (read-only: for scripted policies, rendering and
+    /// tests).
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn task(&self) -> &T {
+        &self.task
+    }
+
+    /// The action mapping (the same component the deployment loop uses).
+    pub fn mapper(&self) -> &ActionMapper {
+        &self.mapper
+    }
+
+    /// The state the last observation was computed from.
+    pub fn state(&self) -> Option<&ArmState> {
+        self.episode.as_ref().map(|e| &e.state)
+    }
+
+    /// What the arm is currently commanded to do.
+    pub fn command(&self) -> Option<&Command> {
+        self.episode.as_ref().map(|e| &e.command)
+    }
+
+    /// Draws this episode's physical parameters and object shapes and applies them; returns
+    /// the latency and the `param/…` values for the reset info.
+    fn randomize(&mut self) -> Result<(u32, NamedValues)> {
+        let d = self.config.randomization.clone();
+        let mut report = NamedValues::new();
+        let dof = self.scene.arm_dof();
+        let mut params = PhysicalParams::default();
+        let mut jitter = Vec::new();
+        let mut latency = 0;
+        if d.enabled {
+            let damping: Vec<f32> = (0..dof)
+                .map(|_| uniform(&mut self.rng, d.joint_damping))
+                .collect();
+            params.gain_scale = uniform(&mut self.rng, d.actuator_gain_scale);
+            latency = self.rng.random_range(0..=d.max_latency_steps);
+            jitter = (0..dof)
+                .map(|_| (self.rng.random::<f32>() * 2.0 - 1.0) * d.initial_joint_jitter)
+                .collect();
+            for (j, v) in damping.iter().enumerate() {
+                report.set(format!("param/joint_damping_{j}"), *v);
+            }
+            report.set("param/gain_scale", params.gain_scale);
+            report.set("param/latency_steps", latency as f32);
+            params.arm_damping = Some(damping);
+        }
+        self.scene.restore_home(&params, &jitter)?;
+        for i in 0..self.scene.num_objects() {
+            let nominal = self.scene.object_config(i).clone();
+            let mut shape = if self.config.shapes.enabled {
+                crate::tasks::shapes::draw(&self.config.shapes, &mut self.rng)
+            } else {
+                self.nominal_shapes[i].clone()
+            };
+            let (mut mass, mut friction) = (nominal.mass, nominal.friction);
+            if d.enabled {
+                mass = uniform(&mut self.rng, d.object_mass);
+                friction = uniform(&mut self.rng, d.object_friction);
+                shape = crate::tasks::shapes::scaled(&shape, uniform(&mut self.rng, d.object_scale));
+            }
+            if d.enabled || self.config.shapes.enabled {
+                report.set(format!("param/object{i}_mass"), mass);
+                report.set(format!("param/object{i}_friction"), friction);
+            }
+            self.scene.set_object_params(i, &shape, mass, friction)?;
+        }
+        Ok((latency, report))
+    }
+
+    fn add_noise(&mut self, obs: &mut [f32]) {
+        if !self.config.randomization.enabled {
+            return;
+        }
+        let noise = &self.config.randomization.observation_noise;
+        for (range, group) in &self.noise_groups {
+            let std = group.std(noise);
+            if std > 0.0 {
+                for v in &mut obs[range.clone()] {
+                    *v += std * gaussian(&mut self.rng);
+                }
+            }
+        }
+    }
+
+    fn observe(&mut self, state: &ArmState, previous_action: &[f32]) -> Vec<f32> {
+        let mut obs = Vec::with_capacity(self.observation_space.dim());
+        self.task
+            .observe(state, previous_action, &mut ObsWriter::new(&mut obs));
+        self.add_noise(&mut obs);
+        obs
+    }
+
+    fn no_op_action(&self) -> Vec<f32> {
+        let mut a = vec![0.0; self.action_space.dim()];
+        *a.last_mut().expect("action has a gripper entry") = 1.0;
+        a
+    }
+
+    fn check_action(&self, action: &[f32]) -> Result<()> {
+        let n = self.action_space.dim();
+        if action.len() != n {
+            return Err(EnvError::Action(format!(
+                "expected {n} values ({}), got {}",
+                self.mapper.layout(),
+                action.len()
+            )));
+        }
+        if let Some(i) = action.iter().position(|v| !v.is_finite()) {
+            return Err(EnvError::Action(format!(
+                "value {i} is {}; actions must be finite",
+                action[i]
+            )));
+        }
+        Ok(())
+    }
+
+    /// The step that ends an episode whose physics produced non-finite numbers.
+    fn non_finite_step(&mut self) -> Step {
+        let episode = self.episode.as_mut().expect("checked by step");
+        episode.done = true;
+        Step {
+            obs: episode.last_obs.clone(),
+            reward: 0.0,
+            terminated: false,
+            truncated: true,
+            info: Info {
+                elapsed_steps: episode.steps,
+                events: vec![EpisodeEvent::NonFiniteState],
+                ..Info::default()
+            },
+        }
+    }
+
+    fn render_text(&self) -> String {
+        let state = ArmState::from_scene(&self.scene);
+        let tcp = state.tcp.translation.vector;
+        let steps = self.episode.as_ref().map(|e| e.steps).unwrap_or(0);
+        let q: Vec<String> = state.q.iter().map(|v| format!("{v:.3}")).collect();
+        format!(
+            "{} step {steps}: q = [{}] rad, tcp = ({:.3}, {:.3}, {:.3}) m, opening = {:.1} mm. {}",
+            T::ID,
+            q.join(", "),
+            tcp.x,
+            tcp.y,
+            tcp.z,
+            state.gripper_opening * 1000.0,
+            self.task.describe(&state)
+        )
+    }
+}
+
+impl<T: Task> Env for ArmEnv<T> {
+    fn metadata(&self) -> Metadata {
+        Metadata {
+            id: T::ID,
+            render_modes: vec![RenderMode::Ansi],
+            render_fps: 1.0 / self.scene.control_period(),
+        }
+    }
+
+    fn observation_space(&self) -> &BoxSpace {
+        &self.observation_space
+    }
+
+    fn action_space(&self) -> &BoxSpace {
+        &self.action_space
+    }
+
+    fn render_mode(&self) -> Option<RenderMode> {
+        self.config.task.render_mode()
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f32>, Info)> {
+        if let Some(seed) = seed {
+            self.rng = ChaCha8Rng::seed_from_u64(seed);
+        }
+        let (latency, params) = self.randomize()?;
+        self.task.initialize_episode(&mut self.scene, &mut self.rng)?;
+        let state = ArmState::from_scene(&self.scene);
+        let command = self.mapper.hold(&state, self.scene.arm_targets());
+        let previous_action = vec![0.0; self.action_space.dim()];
+        let obs = self.observe(&state, &previous_action);
+        let no_op = self.no_op_action();
+        self.episode = Some(Episode {
+            steps: 0,
+            done: false,
+            command,
+            pending: std::iter::repeat_n(no_op, latency as usize).collect(),
+            state,
+            last_obs: obs.clone(),
+        });
+        Ok((
+            obs,
+            Info {
+                extras: params,
+                ..Info::default()
+            },
+        ))
+    }
+
+    fn step(&mut self, action: &[f32]) -> Result<Step> {
+        match &self.episode {
+            None => return Err(EnvError::Usage("call reset() before step()".into())),
+            Some(e) if e.done => {
+                return Err(EnvError::Usage(
+                    "the episode has ended; call reset() before stepping again".into(),
+                ));
+            }
+            Some(_) => {}
+        }
+        self.check_action(action)?;
+        let mut clipped = action.to_vec();
+        self.action_space.clip(&mut clipped);
+
+        let mut events = Vec::new();
+        let episode = self.episode.as_mut().expect("checked");
+        // Control latency: the action applied now was chosen `latency` steps ago.
+        episode.pending.push_back(clipped);
+        let applied = episode.pending.pop_front().expect("just pushed");
+        if let Some(MappingEvent::IkFailed) =
+            self.mapper
+                .apply(&episode.state, &applied, &mut episode.command)
+        {
+            events.push(EpisodeEvent::IkFailed);
+        }
+        self.scene.set_arm_targets(&episode.command.arm_target)?;
+        self.scene.set_gripper_open(episode.command.gripper_open)?;
+        match self.scene.step_control() {
+            Ok(()) => {}
+            Err(SimError::NonFinite(_)) => return Ok(self.non_finite_step()),
+            Err(e) => return Err(e.into()),
+        }
+
+        let normalised: Vec<f32> = applied
+            .iter()
+            .zip(&self.action_space.high)
+            .map(|(a, h)| a / h)
+            .collect();
+        let state = ArmState::from_scene(&self.scene);
+        let obs = self.observe(&state, &normalised);
+        if obs.iter().any(|v| !v.is_finite()) {
+            return Ok(self.non_finite_step());
+        }
+        let evaluation = self.task.evaluate(&self.scene, &state);
+        let max_steps = self.config.task.max_episode_steps();
+        let episode = self.episode.as_mut().expect("checked");
+        episode.steps += 1;
+        let steps_left = max_steps.saturating_sub(episode.steps);
+        let reward_terms = self.task.reward(&evaluation, &state, steps_left);
+        let terminated = evaluation.success || evaluation.failure.is_some();
+        let truncated = !terminated && episode.steps >= max_steps;
+        episode.done = terminated || truncated;
+        episode.last_obs.clone_from(&obs);
+        episode.state = state;
+        events.extend(evaluation.failure);
+        Ok(Step {
+            obs,
+            reward: reward_terms.total(),
+            terminated,
+            truncated,
+            info: Info {
+                success: evaluation.success,
+                elapsed_steps: episode.steps,
+                events,
+                extras: evaluation.extras,
+                reward_terms,
+            },
+        })
+    }
+
+    fn render(&mut self) -> Result<Option<Frame>> {
+        Ok(self
+            .config
+            .task
+            .render_mode()
+            .map(|RenderMode::Ansi| Frame::Text(self.render_text())))
+    }
+
+    fn close(&mut self) {
+        self.episode = None;
+    }
+}

@@ -1,0 +1,92 @@
+//! Writing observations: each value goes in with its noise group, so domain randomisation knows
+//! which standard deviation applies to which entries without a hand-kept index table.
+
+use crate::arm::config::ObservationNoise;
+use fairgrasp_sim::rapier3d::na::Vector3;
+use std::ops::Range;
+
+/// Which noise standard deviation applies to a range of observation entries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NoiseGroup {
+    JointPosition,
+    JointVelocity,
+    EePosition,
+    EeOrientation,
+    EeVelocity,
+    ObjectPosition,
+    ObjectOrientation,
+    Gripper,
+    /// Exact or derived quantities (flags, goals, the previous action): no noise of their own.
+    None,
+}
+
+impl NoiseGroup {
+    pub fn std(self, noise: &ObservationNoise) -> f32 {
+        match self {
+            NoiseGroup::JointPosition => noise.joint_position,
+            NoiseGroup::JointVelocity => noise.joint_velocity,
+            NoiseGroup::EePosition => noise.ee_position,
+            NoiseGroup::EeOrientation => noise.ee_orientation,
+            NoiseGroup::EeVelocity => noise.ee_velocity,
+            NoiseGroup::ObjectPosition => noise.object_position,
+            NoiseGroup::ObjectOrientation => noise.object_orientation,
+            NoiseGroup::Gripper => noise.gripper_opening,
+            NoiseGroup::None => 0.0,
+        }
+    }
+}
+
+/// Appends observation values, recording their noise groups when asked to (once, when the
+/// environment is built).
+pub struct ObsWriter<'a> {
+    out: &'a mut Vec<f32>,
+    groups: Option<&'a mut Vec<(Range<usize>, NoiseGroup)>>,
+}
+
+impl<'a> ObsWriter<'a> {
+    /// Writes into `out` (cleared first).
+    pub fn new(out: &'a mut Vec<f32>) -> Self {
+        out.clear();
+        Self { out, groups: None }
+    }
+
+    /// Writes into `out` and records each value's group in `groups`.
+    pub fn recording(
+        out: &'a mut Vec<f32>,
+        groups: &'a mut Vec<(Range<usize>, NoiseGroup)>,
+    ) -> Self {
+        out.clear();
+        groups.clear();
+        Self {
+            out,
+            groups: Some(groups),
+        }
+    }
+
+    pub fn push(&mut self, group: NoiseGroup, values: &[f32]) {
+        let start = self.out.len();
+        self.out.extend_from_slice(values);
+        if let Some(groups) = &mut self.groups {
+            match groups.last_mut() {
+                Some((range, g)) if *g == group && range.end == start => range.end = self.out.len(),
+                _ => groups.push((start..self.out.len(), group)),
+            }
+        }
+    }
+
+    pub fn push1(&mut self, group: NoiseGroup, value: f32) {
+        self.push(group, &[value]);
+    }
+
+    pub fn push3(&mut self, group: NoiseGroup, v: &Vector3<f64>) {
+        self.push(group, &[v.x as f32, v.y as f32, v.z as f32]);
+    }
+
+    pub fn len(&self) -> usize {
+        self.out.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.out.is_empty()
+    }
+}

@@ -1,0 +1,384 @@
+//! `FaArmGrasp-v0`: pick up the object and hold it lifted.
+//!
+//! Success: the gripper is closed on the object, the object is at least `success_min_lift`
+//! above its resting height and within `success_max_offset` of the TCP, for
+//! `success_hold_steps` consecutive control steps. The object falling off the table ends the
+//! episode as a failure.
+
+use crate::arm::{
+    ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
+    TaskSettings,
+};
+use crate::config::{check_non_negative, check_positive};
+use crate::core::{EpisodeEvent, NamedValues, RenderMode};
+use crate::error::{EnvError, Result};
+use crate::tasks::placement::{self, Area};
+use fairgrasp_sim::scene::Scene;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// The Gymnasium id of the grasp task.
+pub const ENV_ID: &str = "FaArmGrasp-v0";
+
+/// Which observation vector the grasp task returns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObservationPreset {
+    /// The design's 23 values: joint angles (6), EE position (3), EE Euler angles (3), object
+    /// position (3), object quaternion (4), EE linear velocity (3), gripper opening (1).
+    Seed23,
+    /// 33 values plus the previous action, chosen for learning: continuous orientations,
+    /// velocities, the EE→object vector, contact flags (docs/tasks.md). With random shapes,
+    /// 5 more: the object's half extents and its twofold relative yaw.
+    Rich,
+}
+
+/// The `[task]` section of the grasp task.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraspSettings {
+    pub observation: ObservationPreset,
+    /// Control steps before the episode is truncated.
+    pub max_episode_steps: u32,
+    /// Lift above the resting height that counts as lifted (m).
+    pub success_min_lift: f32,
+    /// Largest object–TCP distance that counts as centred (m).
+    pub success_max_offset: f32,
+    /// Consecutive control steps the success conditions must hold.
+    pub success_hold_steps: u32,
+    pub render_mode: Option<RenderMode>,
+}
+
+impl Default for GraspSettings {
+    fn default() -> Self {
+        Self {
+            observation: ObservationPreset::Rich,
+            max_episode_steps: 100,
+            success_min_lift: 0.05,
+            success_max_offset: 0.08,
+            success_hold_steps: 10,
+            render_mode: None,
+        }
+    }
+}
+
+impl TaskSettings for GraspSettings {
+    fn max_episode_steps(&self) -> u32 {
+        self.max_episode_steps
+    }
+
+    fn render_mode(&self) -> Option<RenderMode> {
+        self.render_mode
+    }
+
+    fn validate(&self) -> Result<()> {
+        if self.max_episode_steps == 0 {
+            return Err(EnvError::config(
+                "task.max_episode_steps",
+                "must be at least 1",
+            ));
+        }
+        check_positive("task.success_min_lift", self.success_min_lift)?;
+        check_positive("task.success_max_offset", self.success_max_offset)?;
+        if self.success_hold_steps == 0 {
+            return Err(EnvError::config(
+                "task.success_hold_steps",
+                "must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Which reward the grasp task pays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RewardKind {
+    /// `success` on success, else 0.
+    Sparse,
+    /// The design's mix: approach progress, near bonus, one-time grasp and lift-hold bonuses,
+    /// time penalty.
+    Hybrid,
+    /// Dense and staged like ManiSkill's PickCube, shifted to be ≤ 0 so that finishing early
+    /// always pays: `(reach + grasped + lift) / 3 − 1` per step, with reach = 1 − tanh(4·d),
+    /// grasped ∈ {0, 1}, lift = min(lift / (min_lift + 1 cm), 1) while grasped.
+    /// Knocking the object off the table costs the worst reward for every remaining step, so
+    /// it never pays to end an episode that way.
+    Staged,
+}
+
+/// The `[reward]` section of the grasp task. Every term is reported in `info.reward_terms`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraspReward {
+    pub kind: RewardKind,
+    /// × (previous EE–object distance − current), per step.
+    pub approach: f32,
+    /// Paid every step the EE is within `near_radius` of the object.
+    pub near: f32,
+    pub near_radius: f32,
+    /// Paid once per episode, the first time the object is grasped.
+    pub grasp: f32,
+    /// Paid once per episode, on success (lifted and held).
+    pub lift_hold: f32,
+    /// Subtracted every step.
+    pub time_penalty: f32,
+    /// Subtracted when the object leaves the table (the episode terminates).
+    pub off_table_penalty: f32,
+    /// Paid on success (sparse and staged kinds).
+    pub success: f32,
+}
+
+impl Default for GraspReward {
+    fn default() -> Self {
+        Self {
+            kind: RewardKind::Hybrid,
+            approach: 0.1,
+            near: 0.5,
+            near_radius: 0.10,
+            grasp: 5.0,
+            lift_hold: 10.0,
+            time_penalty: 0.01,
+            off_table_penalty: 10.0,
+            success: 10.0,
+        }
+    }
+}
+
+impl RewardSettings for GraspReward {
+    fn validate(&self) -> Result<()> {
+        for (key, v) in [
+            ("reward.approach", self.approach),
+            ("reward.near", self.near),
+            ("reward.grasp", self.grasp),
+            ("reward.lift_hold", self.lift_hold),
+            ("reward.time_penalty", self.time_penalty),
+            ("reward.off_table_penalty", self.off_table_penalty),
+            ("reward.success", self.success),
+        ] {
+            check_non_negative(key, v)?;
+        }
+        check_positive("reward.near_radius", self.near_radius)
+    }
+}
+
+/// Everything that defines a grasp environment.
+pub type GraspConfig = ArmEnvConfig<GraspSettings, GraspReward>;
+/// The grasp environment.
+pub type GraspEnv = ArmEnv<Grasp>;
+
+/// Counts consecutive control steps that satisfy a condition.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Streak(pub u32);
+
+impl Streak {
+    /// Feeds one step; returns the new count.
+    pub fn update(&mut self, holds: bool) -> u32 {
+        self.0 = if holds { self.0 + 1 } else { 0 };
+        self.0
+    }
+}
+
+/// The grasp task (object 0 is the one to lift; any others are obstacles).
+pub struct Grasp {
+    settings: GraspSettings,
+    reward: GraspReward,
+    random_shapes: bool,
+    streak: Streak,
+    previous_distance: f32,
+    grasp_paid: bool,
+}
+
+/// Object `i`'s yaw relative to the TCP's (rad).
+pub(crate) fn relative_yaw(state: &ArmState, i: usize) -> f64 {
+    state.objects[i].pose.rotation.euler_angles().2 - state.tcp.rotation.euler_angles().2
+}
+
+/// The `rich` layout around object `i` (33 values plus the previous action; docs/tasks.md):
+/// joints, velocities, TCP position and orientation (two rotation-matrix columns: continuous,
+/// unlike Euler angles near a top-down pose), the object's position, its yaw relative to the
+/// TCP with the cube's fourfold symmetry folded out, the TCP→object vector, the lift, the
+/// gripper opening, the pad contacts and the previous action.
+pub(crate) fn rich_observation(s: &ArmState, i: usize, previous_action: &[f32], out: &mut ObsWriter) {
+    use NoiseGroup::*;
+    let object = &s.objects[i];
+    out.push(JointPosition, &s.q);
+    out.push(JointVelocity, &s.qd);
+    out.push3(EePosition, &s.tcp.translation.vector);
+    let m = s.tcp.rotation.to_rotation_matrix();
+    for c in 0..2 {
+        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
+    }
+    out.push3(ObjectPosition, &object.pose.translation.vector);
+    let yaw = relative_yaw(s, i);
+    out.push(
+        ObjectOrientation,
+        &[(4.0 * yaw).sin() as f32, (4.0 * yaw).cos() as f32],
+    );
+    out.push3(ObjectPosition, &s.tcp_to_object(i));
+    out.push1(ObjectPosition, s.lift(i) as f32);
+    out.push1(Gripper, s.gripper_opening);
+    out.push(None, &object.pad_contacts.map(|c| if c { 1.0 } else { 0.0 }));
+    out.push(None, previous_action);
+}
+
+impl Task for Grasp {
+    type Settings = GraspSettings;
+    type Reward = GraspReward;
+    const ID: &'static str = ENV_ID;
+
+    fn new(config: &GraspConfig, scene: &Scene) -> Result<Self> {
+        if scene.arm_dof() != 6 {
+            return Err(EnvError::config(
+                "scene.arm.urdf",
+                format!(
+                    "the grasp task needs a six-joint arm, this one has {}",
+                    scene.arm_dof()
+                ),
+            ));
+        }
+        Ok(Self {
+            settings: config.task.clone(),
+            reward: config.reward.clone(),
+            random_shapes: config.shapes.enabled,
+            streak: Streak::default(),
+            previous_distance: 0.0,
+            grasp_paid: false,
+        })
+    }
+
+    fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
+        placement::place_all(scene, &Area::of_scene(scene), rng)?;
+        self.streak = Streak::default();
+        self.grasp_paid = false;
+        let tcp = scene.tcp_pose().translation.vector;
+        self.previous_distance =
+            (scene.object_state(0).pose.translation.vector - tcp).norm() as f32;
+        Ok(())
+    }
+
+    fn observe(&self, s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
+        use NoiseGroup::*;
+        let object = &s.objects[0];
+        match self.settings.observation {
+            ObservationPreset::Seed23 => {
+                out.push(JointPosition, &s.q);
+                out.push3(EePosition, &s.tcp.translation.vector);
+                let (r, p, y) = s.tcp.rotation.euler_angles();
+                out.push(EeOrientation, &[r as f32, p as f32, y as f32]);
+                out.push3(ObjectPosition, &object.pose.translation.vector);
+                let q = object.pose.rotation.quaternion();
+                out.push(
+                    ObjectOrientation,
+                    &[q.i as f32, q.j as f32, q.k as f32, q.w as f32],
+                );
+                out.push3(EeVelocity, &s.tcp_linvel);
+                out.push1(Gripper, s.gripper_opening);
+            }
+            ObservationPreset::Rich => {
+                rich_observation(s, 0, previous_action, out);
+                if self.random_shapes {
+                    let yaw = relative_yaw(s, 0);
+                    out.push(None, &object.half_extents);
+                    out.push(
+                        ObjectOrientation,
+                        &[(2.0 * yaw).sin() as f32, (2.0 * yaw).cos() as f32],
+                    );
+                }
+            }
+        }
+    }
+
+    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation {
+        let grasped = state.grasped(0);
+        let lift = state.lift(0);
+        let distance = state.tcp_to_object(0).norm();
+        let holds = grasped
+            && lift > self.settings.success_min_lift as f64
+            && distance < self.settings.success_max_offset as f64;
+        let streak = self.streak.update(holds);
+        Evaluation {
+            success: streak >= self.settings.success_hold_steps,
+            failure: scene
+                .object_off_table(0)
+                .then_some(EpisodeEvent::ObjectOffTable),
+            extras: NamedValues::new()
+                .with("grasped", grasped as u8 as f32)
+                .with("lift", lift as f32)
+                .with("ee_object_distance", distance as f32)
+                .with("success_streak", streak as f32),
+        }
+    }
+
+    fn reward(&mut self, e: &Evaluation, state: &ArmState, steps_left: u32) -> NamedValues {
+        let r = &self.reward;
+        let distance = state.tcp_to_object(0).norm() as f32;
+        let grasped = state.grasped(0);
+        let off_table = e.failure.is_some();
+        let mut terms = NamedValues::new();
+        match r.kind {
+            RewardKind::Sparse => {
+                terms.set("success", if e.success { r.success } else { 0.0 });
+            }
+            RewardKind::Staged => {
+                let third = 1.0 / 3.0;
+                terms.set("reach", third * (1.0 - (4.0 * distance).tanh()));
+                terms.set("grasp", if grasped { third } else { 0.0 });
+                // Linear in the lift: a steady gradient from the table up (a tanh saturating
+                // at the goal gave too little pull for the first centimetres).
+                let goal = self.settings.success_min_lift + 0.01;
+                let lift = (state.lift(0) as f32 / goal).clamp(0.0, 1.0);
+                terms.set("lift", if grasped { third * lift } else { 0.0 });
+                terms.set("time", -1.0);
+                terms.set("off_table", if off_table { -(steps_left as f32) } else { 0.0 });
+                terms.set("success", if e.success { r.success } else { 0.0 });
+            }
+            RewardKind::Hybrid => {
+                terms.set("approach", r.approach * (self.previous_distance - distance));
+                terms.set(
+                    "near",
+                    if distance < r.near_radius { r.near } else { 0.0 },
+                );
+                // One-time bonuses: paid at most once per episode, so dropping and regrasping
+                // the object earns nothing more.
+                let first_grasp = grasped && !self.grasp_paid;
+                self.grasp_paid |= grasped;
+                terms.set("grasp", if first_grasp { r.grasp } else { 0.0 });
+                terms.set("lift_hold", if e.success { r.lift_hold } else { 0.0 });
+                terms.set("time", -r.time_penalty);
+                terms.set(
+                    "off_table",
+                    if off_table { -r.off_table_penalty } else { 0.0 },
+                );
+            }
+        }
+        self.previous_distance = distance;
+        terms
+    }
+
+    fn describe(&self, s: &ArmState) -> String {
+        let o = s.objects[0].pose.translation.vector;
+        format!(
+            "object = ({:.3}, {:.3}, {:.3}) m, lift = {:.1} mm, pads touching = {:?}",
+            o.x,
+            o.y,
+            o.z,
+            s.lift(0) * 1000.0,
+            s.objects[0].pad_contacts
+        )
+    }
+}
+
+/// Every observation × action × reward variant of the grasp task (for checkers and docs).
+pub fn all_variants() -> Vec<(ObservationPreset, crate::arm::ActionMode, RewardKind)> {
+    use crate::arm::ActionMode;
+    let mut out = Vec::new();
+    for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
+        for mode in [ActionMode::Joint, ActionMode::Cartesian] {
+            for reward in [RewardKind::Sparse, RewardKind::Hybrid, RewardKind::Staged] {
+                out.push((obs, mode, reward));
+            }
+        }
+    }
+    out
+}

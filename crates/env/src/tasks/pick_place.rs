@@ -1,0 +1,245 @@
+//! `FaArmPickPlace-v0`: pick the object and bring it to a random goal — on the table or up to
+//! `goal_max_height` above it, shown in the observation. Success (ManiSkill's PickCube rule):
+//! the object's centre is within `goal_tolerance` of the goal and slower than
+//! `max_object_speed`, for `success_hold_steps` consecutive control steps.
+
+use crate::arm::{
+    ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
+    TaskSettings,
+};
+use crate::config::{check_non_negative, check_positive};
+use crate::core::{EpisodeEvent, NamedValues, RenderMode};
+use crate::error::{EnvError, Result};
+use crate::tasks::grasp::{Streak, rich_observation};
+use crate::tasks::placement::{self, Area};
+use fairgrasp_sim::rapier3d::na::Vector3;
+use fairgrasp_sim::scene::Scene;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+pub const ENV_ID: &str = "FaArmPickPlace-v0";
+
+/// The `[task]` section of the pick-and-place task.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PickPlaceSettings {
+    pub max_episode_steps: u32,
+    /// Goals are drawn up to this height above the object's resting height (m); 0 keeps them
+    /// on the table.
+    pub goal_max_height: f32,
+    /// Largest distance between the object's centre and the goal that counts as placed (m).
+    pub goal_tolerance: f32,
+    /// The object must be slower than this to count as placed (m/s).
+    pub max_object_speed: f32,
+    /// Consecutive control steps the success conditions must hold.
+    pub success_hold_steps: u32,
+    pub render_mode: Option<RenderMode>,
+}
+
+impl Default for PickPlaceSettings {
+    fn default() -> Self {
+        Self {
+            max_episode_steps: 100,
+            goal_max_height: 0.2,
+            goal_tolerance: 0.025,
+            max_object_speed: 0.05,
+            success_hold_steps: 10,
+            render_mode: None,
+        }
+    }
+}
+
+impl TaskSettings for PickPlaceSettings {
+    fn max_episode_steps(&self) -> u32 {
+        self.max_episode_steps
+    }
+
+    fn render_mode(&self) -> Option<RenderMode> {
+        self.render_mode
+    }
+
+    fn validate(&self) -> Result<()> {
+        if self.max_episode_steps == 0 {
+            return Err(EnvError::config(
+                "task.max_episode_steps",
+                "must be at least 1",
+            ));
+        }
+        check_non_negative("task.goal_max_height", self.goal_max_height)?;
+        if self.goal_max_height > 0.35 {
+            return Err(EnvError::config(
+                "task.goal_max_height",
+                "goals above 35 cm leave the workspace; use at most 0.35",
+            ));
+        }
+        check_positive("task.goal_tolerance", self.goal_tolerance)?;
+        check_positive("task.max_object_speed", self.max_object_speed)?;
+        if self.success_hold_steps == 0 {
+            return Err(EnvError::config(
+                "task.success_hold_steps",
+                "must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Which reward the pick-and-place task pays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlaceRewardKind {
+    /// `success` on success, else 0.
+    Sparse,
+    /// ManiSkill's PickCube stages, shifted to be ≤ 0 per step: `(reach + grasped + place) / 3
+    /// − 1`, with reach = 1 − tanh(4·d(TCP, object)), place = 1 − tanh(4·d(object, goal)) while
+    /// grasped or at the goal. Knocking the object off the table costs −1 for every remaining
+    /// step.
+    Staged,
+}
+
+/// The `[reward]` section of the pick-and-place task.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PickPlaceReward {
+    pub kind: PlaceRewardKind,
+    /// Paid on success.
+    pub success: f32,
+}
+
+impl Default for PickPlaceReward {
+    fn default() -> Self {
+        Self {
+            kind: PlaceRewardKind::Staged,
+            success: 10.0,
+        }
+    }
+}
+
+impl RewardSettings for PickPlaceReward {
+    fn validate(&self) -> Result<()> {
+        check_non_negative("reward.success", self.success)
+    }
+}
+
+pub type PickPlaceConfig = ArmEnvConfig<PickPlaceSettings, PickPlaceReward>;
+pub type PickPlaceEnv = ArmEnv<PickPlace>;
+
+/// The pick-and-place task (object 0; any others are obstacles).
+pub struct PickPlace {
+    settings: PickPlaceSettings,
+    reward: PickPlaceReward,
+    /// The goal of this episode (arm base frame).
+    goal: Vector3<f64>,
+    streak: Streak,
+}
+
+impl PickPlace {
+    /// The goal of the current episode, in the arm base frame (m).
+    pub fn goal(&self) -> Vector3<f64> {
+        self.goal
+    }
+
+    fn object_to_goal(&self, s: &ArmState) -> Vector3<f64> {
+        self.goal - s.objects[0].pose.translation.vector
+    }
+}
+
+impl Task for PickPlace {
+    type Settings = PickPlaceSettings;
+    type Reward = PickPlaceReward;
+    const ID: &'static str = ENV_ID;
+
+    fn new(config: &PickPlaceConfig, scene: &Scene) -> Result<Self> {
+        if scene.arm_dof() != 6 {
+            return Err(EnvError::config(
+                "scene.arm.urdf",
+                "the pick-and-place task needs a six-joint arm",
+            ));
+        }
+        Ok(Self {
+            settings: config.task.clone(),
+            reward: config.reward.clone(),
+            goal: Vector3::zeros(),
+            streak: Streak::default(),
+        })
+    }
+
+    fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
+        let area = Area::of_scene(scene);
+        placement::place_all(scene, &area, rng)?;
+        let [x, y] = area.sample_xy(rng);
+        let rest_z = scene.object_rest_height(0) - scene.base_pose().translation.z;
+        let height = rng.random::<f64>() * self.settings.goal_max_height as f64;
+        self.goal = Vector3::new(x, y, rest_z + height);
+        self.streak = Streak::default();
+        Ok(())
+    }
+
+    fn observe(&self, s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
+        rich_observation(s, 0, previous_action, out);
+        out.push3(NoiseGroup::None, &self.goal);
+        out.push3(NoiseGroup::ObjectPosition, &self.object_to_goal(s));
+    }
+
+    fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation {
+        let to_goal = self.object_to_goal(s).norm();
+        let speed = s.objects[0].linvel.norm();
+        let placed = to_goal < self.settings.goal_tolerance as f64;
+        let still = speed < self.settings.max_object_speed as f64;
+        let streak = self.streak.update(placed && still);
+        Evaluation {
+            success: streak >= self.settings.success_hold_steps,
+            failure: scene
+                .object_off_table(0)
+                .then_some(EpisodeEvent::ObjectOffTable),
+            extras: NamedValues::new()
+                .with("grasped", s.grasped(0) as u8 as f32)
+                .with("lift", s.lift(0) as f32)
+                .with("object_goal_distance", to_goal as f32)
+                .with("placed", placed as u8 as f32)
+                .with("success_streak", streak as f32),
+        }
+    }
+
+    fn reward(&mut self, e: &Evaluation, s: &ArmState, steps_left: u32) -> NamedValues {
+        let mut terms = NamedValues::new();
+        let success = if e.success { self.reward.success } else { 0.0 };
+        match self.reward.kind {
+            PlaceRewardKind::Sparse => terms.set("success", success),
+            PlaceRewardKind::Staged => {
+                let third = 1.0 / 3.0;
+                let grasped = s.grasped(0);
+                let reach = 1.0 - (4.0 * s.tcp_to_object(0).norm() as f32).tanh();
+                let to_goal = self.object_to_goal(s).norm() as f32;
+                let placed = e.extras.value("placed") > 0.0;
+                // Grasped counts as done once the object is at its goal, so releasing it
+                // there (goals on the table) is not punished.
+                let hold = grasped || placed;
+                terms.set("reach", third * if hold { 1.0 } else { reach });
+                terms.set("grasp", if hold { third } else { 0.0 });
+                let place = 1.0 - (4.0 * to_goal).tanh();
+                terms.set("place", if hold { third * place } else { 0.0 });
+                terms.set("time", -1.0);
+                let off = e.failure.is_some();
+                terms.set("off_table", if off { -(steps_left as f32) } else { 0.0 });
+                terms.set("success", success);
+            }
+        }
+        terms
+    }
+
+    fn describe(&self, s: &ArmState) -> String {
+        let o = s.objects[0].pose.translation.vector;
+        format!(
+            "object = ({:.3}, {:.3}, {:.3}) m, goal = ({:.3}, {:.3}, {:.3}) m, {:.1} cm away",
+            o.x,
+            o.y,
+            o.z,
+            self.goal.x,
+            self.goal.y,
+            self.goal.z,
+            self.object_to_goal(s).norm() * 100.0
+        )
+    }
+}

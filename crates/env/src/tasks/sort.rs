@@ -1,0 +1,327 @@
+//! `FaArmSort-v0`: put each object into the bin of its colour.
+//!
+//! `num_objects` objects of different kinds (1–5, 3 by default) lie on the table beside
+//! `num_bins` bins (2–3) with real walls. Each episode gives every object a bin, shown in the
+//! observation as the one-hot colour of that bin. The objects are sorted in order: the
+//! *active* object is the first one not yet resting in its bin, and the observation and the
+//! staged reward centre on it. Success: every object rests in its bin.
+
+use crate::arm::{
+    ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
+    TaskSettings,
+};
+use crate::config::check_non_negative;
+use crate::core::{EpisodeEvent, NamedValues, RenderMode};
+use crate::error::{EnvError, Result};
+use crate::tasks::grasp::rich_observation;
+use crate::tasks::placement::{self, Area};
+use fairgrasp_sim::rapier3d::na::Vector3;
+use fairgrasp_sim::scene::{BinConfig, ObjectConfig, ObjectShape, Scene, SceneConfig};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+pub const ENV_ID: &str = "FaArmSort-v0";
+
+/// Bin colours, in bin order: red, blue, green (linear RGB).
+const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
+
+/// The objects' shapes, cycled: a cube, a cylinder, a long box, a short cylinder, a flat box.
+fn object_shape(k: usize) -> ObjectShape {
+    match k % 5 {
+        0 => ObjectShape::Box {
+            size: [0.045, 0.045, 0.045],
+        },
+        1 => ObjectShape::Cylinder {
+            radius: 0.022,
+            height: 0.05,
+        },
+        2 => ObjectShape::Box {
+            size: [0.04, 0.04, 0.06],
+        },
+        3 => ObjectShape::Cylinder {
+            radius: 0.025,
+            height: 0.04,
+        },
+        _ => ObjectShape::Box {
+            size: [0.05, 0.04, 0.035],
+        },
+    }
+}
+
+/// The `[task]` section of the sorting task.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SortSettings {
+    /// 1–5 objects.
+    pub num_objects: usize,
+    /// 2–3 bins.
+    pub num_bins: usize,
+    pub max_episode_steps: u32,
+    /// Where the objects are placed (arm base frame x, y centre and extent, m).
+    pub object_area_center: [f32; 2],
+    pub object_area_size: [f32; 2],
+    /// Bin centres (arm base frame x, y, m), the first `num_bins` used.
+    pub bin_centers: Vec<[f32; 2]>,
+    /// An object counts as resting when slower than this (m/s).
+    pub max_object_speed: f32,
+    pub render_mode: Option<RenderMode>,
+}
+
+impl Default for SortSettings {
+    fn default() -> Self {
+        Self {
+            num_objects: 3,
+            num_bins: 2,
+            max_episode_steps: 300,
+            object_area_center: [0.45, 0.0],
+            object_area_size: [0.2, 0.2],
+            bin_centers: vec![[0.45, -0.27], [0.45, 0.27], [0.7, 0.0]],
+            max_object_speed: 0.05,
+            render_mode: None,
+        }
+    }
+}
+
+impl TaskSettings for SortSettings {
+    fn max_episode_steps(&self) -> u32 {
+        self.max_episode_steps
+    }
+
+    fn render_mode(&self) -> Option<RenderMode> {
+        self.render_mode
+    }
+
+    fn validate(&self) -> Result<()> {
+        if !(1..=5).contains(&self.num_objects) {
+            return Err(EnvError::config("task.num_objects", "must be in 1..=5"));
+        }
+        if !(2..=3).contains(&self.num_bins) {
+            return Err(EnvError::config("task.num_bins", "must be 2 or 3"));
+        }
+        if self.bin_centers.len() < self.num_bins {
+            return Err(EnvError::config(
+                "task.bin_centers",
+                format!(
+                    "lists {} centres for {} bins",
+                    self.bin_centers.len(),
+                    self.num_bins
+                ),
+            ));
+        }
+        if self.max_episode_steps == 0 {
+            return Err(EnvError::config(
+                "task.max_episode_steps",
+                "must be at least 1",
+            ));
+        }
+        check_non_negative("task.max_object_speed", self.max_object_speed)
+    }
+}
+
+/// The `[reward]` section of the sorting task.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SortReward {
+    /// Paid once for each object the first time it rests in its bin.
+    pub object_sorted: f32,
+    /// Paid on success (every object sorted).
+    pub success: f32,
+}
+
+impl Default for SortReward {
+    fn default() -> Self {
+        Self {
+            object_sorted: 5.0,
+            success: 10.0,
+        }
+    }
+}
+
+impl RewardSettings for SortReward {
+    fn validate(&self) -> Result<()> {
+        check_non_negative("reward.object_sorted", self.object_sorted)?;
+        check_non_negative("reward.success", self.success)
+    }
+}
+
+pub type SortConfig = ArmEnvConfig<SortSettings, SortReward>;
+pub type SortEnv = ArmEnv<Sort>;
+
+/// The sorting task.
+pub struct Sort {
+    settings: SortSettings,
+    reward: SortReward,
+    /// Each object's bin this episode.
+    assignment: Vec<usize>,
+    /// Bin floor centres (arm base frame).
+    bins: Vec<Vector3<f64>>,
+    /// Height above a bin's floor from which objects are dropped in (m).
+    drop_height: f64,
+    /// Objects already paid for.
+    paid: Vec<bool>,
+    /// Objects resting in their bin at the last evaluation.
+    sorted: Vec<bool>,
+}
+
+impl Sort {
+    /// The first object not resting in its bin.
+    fn active(&self) -> Option<usize> {
+        self.sorted.iter().position(|s| !s)
+    }
+
+    /// Where the active object should go: above the centre of its bin.
+    fn drop_point(&self, i: usize) -> Vector3<f64> {
+        self.bins[self.assignment[i]] + Vector3::new(0.0, 0.0, self.drop_height)
+    }
+
+    /// Each object's bin this episode.
+    pub fn assignment(&self) -> &[usize] {
+        &self.assignment
+    }
+}
+
+impl Task for Sort {
+    type Settings = SortSettings;
+    type Reward = SortReward;
+    const ID: &'static str = ENV_ID;
+
+    fn configure_scene(config: &SortConfig, scene: &mut SceneConfig) -> Result<()> {
+        let t = &config.task;
+        scene.objects = (0..t.num_objects)
+            .map(|k| ObjectConfig {
+                name: format!("object{k}"),
+                shape: object_shape(k),
+                mass: 0.08,
+                friction: 0.8,
+                color: [0.6, 0.6, 0.6],
+            })
+            .collect();
+        scene.bins = (0..t.num_bins)
+            .map(|j| BinConfig {
+                name: format!("bin{j}"),
+                center: t.bin_centers[j],
+                color: BIN_COLORS[j],
+                ..BinConfig::default()
+            })
+            .collect();
+        Ok(())
+    }
+
+    fn new(config: &SortConfig, scene: &Scene) -> Result<Self> {
+        let base = scene.base_pose();
+        let bins = (0..scene.bins().len())
+            .map(|j| (base.inverse() * scene.bin_pose(j)).translation.vector)
+            .collect();
+        let wall = scene.bins().first().map(|b| b.wall_height).unwrap_or(0.05) as f64;
+        let n = config.task.num_objects;
+        Ok(Self {
+            settings: config.task.clone(),
+            reward: config.reward.clone(),
+            assignment: vec![0; n],
+            bins,
+            drop_height: wall + 0.06,
+            paid: vec![false; n],
+            sorted: vec![false; n],
+        })
+    }
+
+    fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
+        let t = &self.settings;
+        let area = Area {
+            center: t.object_area_center,
+            size: t.object_area_size,
+            yaw_range: std::f32::consts::PI,
+        };
+        placement::place_all(scene, &area, rng)?;
+        for a in &mut self.assignment {
+            *a = rng.random_range(0..t.num_bins);
+        }
+        self.paid.fill(false);
+        self.sorted.fill(false);
+        Ok(())
+    }
+
+    fn observe(&self, s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
+        use NoiseGroup::*;
+        let active = self.active().unwrap_or(0);
+        rich_observation(s, active, previous_action, out);
+        out.push3(ObjectPosition, &(self.drop_point(active) - s.objects[active].pose.translation.vector));
+        for (i, object) in s.objects.iter().enumerate() {
+            out.push3(ObjectPosition, &object.pose.translation.vector);
+            let colour: Vec<f32> = (0..self.bins.len())
+                .map(|j| (self.assignment[i] == j) as u8 as f32)
+                .collect();
+            out.push(None, &colour);
+            out.push1(None, self.sorted[i] as u8 as f32);
+            out.push1(None, (i == active) as u8 as f32);
+        }
+        for bin in &self.bins {
+            out.push(None, &[bin.x as f32, bin.y as f32]);
+        }
+    }
+
+    fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation {
+        for i in 0..self.sorted.len() {
+            let resting = s.objects[i].linvel.norm() < self.settings.max_object_speed as f64;
+            self.sorted[i] =
+                scene.object_in_bin(i, self.assignment[i]) && resting && !s.grasped(i);
+        }
+        let count = self.sorted.iter().filter(|s| **s).count();
+        let off = (0..self.sorted.len()).any(|i| scene.object_off_table(i));
+        let active = self.active();
+        let grasped = active.is_some_and(|i| s.grasped(i));
+        Evaluation {
+            success: count == self.sorted.len(),
+            failure: off.then_some(EpisodeEvent::ObjectOffTable),
+            extras: NamedValues::new()
+                .with("objects_sorted", count as f32)
+                .with("fraction_sorted", count as f32 / self.sorted.len() as f32)
+                .with("grasped", grasped as u8 as f32),
+        }
+    }
+
+    fn reward(&mut self, e: &Evaluation, s: &ArmState, steps_left: u32) -> NamedValues {
+        let n = self.sorted.len() as f32;
+        let mut newly = 0;
+        for (paid, sorted) in self.paid.iter_mut().zip(&self.sorted) {
+            if *sorted && !*paid {
+                *paid = true;
+                newly += 1;
+            }
+        }
+        // Progress of the active object in [0, 1]: reach, grasp, carry to its drop point.
+        let progress = match self.active() {
+            None => 1.0,
+            Some(i) => {
+                let grasped = s.grasped(i);
+                let reach = 1.0 - (4.0 * s.tcp_to_object(i).norm() as f32).tanh();
+                let to_drop = (self.drop_point(i) - s.objects[i].pose.translation.vector).norm();
+                let carry = 1.0 - (4.0 * to_drop as f32).tanh();
+                if grasped {
+                    (2.0 + carry) / 3.0
+                } else {
+                    reach / 3.0
+                }
+            }
+        };
+        let count = e.extras.value("objects_sorted");
+        let mut terms = NamedValues::new();
+        // ≤ 0 per step before success, rising with every object sorted.
+        terms.set("progress", (count + progress) / n - 1.0);
+        terms.set("object_sorted", newly as f32 * self.reward.object_sorted);
+        let off = e.failure.is_some();
+        terms.set("off_table", if off { -(steps_left as f32) } else { 0.0 });
+        terms.set("success", if e.success { self.reward.success } else { 0.0 });
+        terms
+    }
+
+    fn describe(&self, _s: &ArmState) -> String {
+        format!(
+            "bins {:?}, sorted {:?}, active {:?}",
+            self.assignment,
+            self.sorted,
+            self.active()
+        )
+    }
+}
