@@ -20,10 +20,9 @@ pub struct EnvSpec {
     pub summary: &'static str,
     /// Builds the env from a configuration table (validated).
     pub make: fn(&toml::Table) -> Result<Box<dyn Env>>,
-    /// The configuration with every key at its default, as TOML (`fairgrasp env config`).
-    pub default_config: fn() -> toml::Table,
-    /// The validated configuration with every key filled in (cheap: no scene).
-    pub effective: fn(&toml::Table) -> Result<toml::Table>,
+    /// The validated configuration with every key filled in, as TOML text in the order of
+    /// the env's settings (`fairgrasp env config`; cheap: no scene is built).
+    pub config_toml: fn(&toml::Table) -> Result<String>,
 }
 
 fn make_arm<T: Task>(table: &toml::Table) -> Result<Box<dyn Env>> {
@@ -31,15 +30,10 @@ fn make_arm<T: Task>(table: &toml::Table) -> Result<Box<dyn Env>> {
     Ok(Box::new(ArmEnv::<T>::new(config)?))
 }
 
-fn effective_arm<T: Task>(table: &toml::Table) -> Result<toml::Table> {
+fn config_toml_arm<T: Task>(table: &toml::Table) -> Result<String> {
     let config: ArmEnvConfig<T::Settings, T::Reward> = from_table(table.clone())?;
     config.validate()?;
-    toml::Table::try_from(config).map_err(|e| EnvError::config("config", e.to_string()))
-}
-
-fn default_arm<T: Task>() -> toml::Table {
-    toml::Table::try_from(ArmEnvConfig::<T::Settings, T::Reward>::default())
-        .expect("a default configuration serialises")
+    toml::to_string(&config).map_err(|e| EnvError::config("config", e.to_string()))
 }
 
 fn no_settings(id: &str, table: &toml::Table) -> Result<()> {
@@ -52,31 +46,25 @@ fn no_settings(id: &str, table: &toml::Table) -> Result<()> {
     }
 }
 
-fn empty() -> toml::Table {
-    toml::Table::new()
-}
 
 static SPECS: &[EnvSpec] = &[
     EnvSpec {
         id: "FaArmGrasp-v0",
         summary: "lift an object off the table and hold it (one cube by default; random shapes with `shapes.enabled`)",
         make: make_arm::<Grasp>,
-        default_config: default_arm::<Grasp>,
-        effective: effective_arm::<Grasp>,
+        config_toml: config_toml_arm::<Grasp>,
     },
     EnvSpec {
         id: "FaArmPickPlace-v0",
         summary: "pick the object and bring it to a random goal on the table or up to 20 cm above it",
         make: make_arm::<PickPlace>,
-        default_config: default_arm::<PickPlace>,
-        effective: effective_arm::<PickPlace>,
+        config_toml: config_toml_arm::<PickPlace>,
     },
     EnvSpec {
         id: "FaArmSort-v0",
         summary: "put each object into the bin of its colour (3 objects and 2 bins by default)",
         make: make_arm::<Sort>,
-        default_config: default_arm::<Sort>,
-        effective: effective_arm::<Sort>,
+        config_toml: config_toml_arm::<Sort>,
     },
     EnvSpec {
         id: "Pendulum-v1",
@@ -85,8 +73,7 @@ static SPECS: &[EnvSpec] = &[
             no_settings("Pendulum-v1", t)?;
             Ok(Box::new(Pendulum::new()))
         },
-        default_config: empty,
-        effective: |t| no_settings("Pendulum-v1", t).map(|_| empty()),
+        config_toml: |t| no_settings("Pendulum-v1", t).map(|_| String::new()),
     },
     EnvSpec {
         id: "PointReach-v0",
@@ -95,8 +82,7 @@ static SPECS: &[EnvSpec] = &[
             no_settings("PointReach-v0", t)?;
             Ok(Box::new(PointReach::new()))
         },
-        default_config: empty,
-        effective: |t| no_settings("PointReach-v0", t).map(|_| empty()),
+        config_toml: |t| no_settings("PointReach-v0", t).map(|_| String::new()),
     },
 ];
 
@@ -127,15 +113,23 @@ pub fn make(id: &str, config: &toml::Table) -> Result<Box<dyn Env>> {
 
 /// The configuration of `id` with every key at its default.
 pub fn default_config(id: &str) -> Result<toml::Table> {
-    Ok((spec(id)?.default_config)())
+    effective_config(id, &toml::Table::new())
 }
 
 /// Checks a configuration of `id` (unknown keys, ranges) without building the env.
 pub fn validate(id: &str, config: &toml::Table) -> Result<()> {
-    effective_config(id, config).map(|_| ())
+    config_toml(id, config).map(|_| ())
+}
+
+/// `config` validated and completed with the defaults of every key it leaves out, as TOML
+/// text.
+pub fn config_toml(id: &str, config: &toml::Table) -> Result<String> {
+    (spec(id)?.config_toml)(config)
 }
 
 /// `config` validated and completed with the defaults of every key it leaves out.
 pub fn effective_config(id: &str, config: &toml::Table) -> Result<toml::Table> {
-    (spec(id)?.effective)(config)
+    config_toml(id, config)?
+        .parse()
+        .map_err(|e: toml::de::Error| EnvError::config("config", e.to_string()))
 }

@@ -245,7 +245,7 @@ fn record_episode_statistics_sums_rewards_over_each_episode() {
                 assert!((env.current_return() - sum).abs() < 1e-12);
             }
         }
-        let stats = *env.episode().expect("stats at the episode's end");
+        let stats = env.episode().expect("stats at the episode's end").clone();
         assert_eq!(stats.length, 6);
         assert!(
             (stats.episode_return - sum).abs() < 1e-9,
@@ -257,7 +257,7 @@ fn record_episode_statistics_sums_rewards_over_each_episode() {
         assert!(env.episode().is_none(), "reset clears the report");
     }
     assert_eq!(env.episode_count(), 3);
-    let recent: Vec<EpisodeStats> = env.recent_episodes().iter().copied().collect();
+    let recent: Vec<EpisodeStats> = env.recent_episodes().iter().cloned().collect();
     assert_eq!(recent, expected[1..].to_vec(), "keeps the last two");
 
     // An episode cut short by reset is not recorded; a truncated one reports no success.
@@ -268,7 +268,7 @@ fn record_episode_statistics_sums_rewards_over_each_episode() {
     for _ in 0..6 {
         env.step(&[1.0, 1.0, 0.0]).unwrap();
     }
-    let stats = *env.episode().unwrap();
+    let stats = env.episode().unwrap().clone();
     assert_eq!(env.episode_count(), 4);
     assert!(!stats.success);
     let want: f64 = (1..=6).map(|t| reward_of(t, 1.0) as f64).sum();
@@ -336,7 +336,7 @@ fn vec_normalize_learns_the_observation_and_return_statistics() {
             .map(|i| step.terminal_observation(i).map(<[f32]>::to_vec))
             .collect();
         let episodes: Vec<Option<EpisodeStats>> =
-            (0..n).map(|i| step.episode(i).copied()).collect();
+            (0..n).map(|i| step.episode(i).cloned()).collect();
 
         all_obs.extend(venv.original_observations().iter().map(|&x| x as f64));
         for i in 0..n {
@@ -365,8 +365,8 @@ fn vec_normalize_learns_the_observation_and_return_statistics() {
                 );
                 assert_ne!(raw, normalised_terminal[i].clone().unwrap());
                 // Episode statistics stay in raw reward units.
-                assert_eq!(episodes[i].unwrap().episode_return, episode_sums[i]);
-                assert_eq!(episodes[i].unwrap().length, 25);
+                assert_eq!(episodes[i].as_ref().unwrap().episode_return, episode_sums[i]);
+                assert_eq!(episodes[i].as_ref().unwrap().length, 25);
                 episode_sums[i] = 0.0;
             } else {
                 assert!(normalised_terminal[i].is_none());

@@ -4,7 +4,7 @@
 //! - [`Pendulum`]: Gymnasium's `Pendulum-v1` dynamics and reward (swing up and balance).
 //! - [`PointReach`]: a 2-D point mass pushed to a random goal (dense reward; easy).
 
-use crate::core::{Env, Frame, Info, Metadata, RenderMode, Step};
+use crate::core::{Env, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::{EnvError, Result};
 use crate::spaces::BoxSpace;
 use rand::{Rng, SeedableRng};
@@ -224,7 +224,7 @@ impl Env for PointReach {
         self.steps = 0;
         self.started = true;
         let info = Info {
-            ee_object_distance: self.distance(),
+            extras: NamedValues::new().with("distance", self.distance()),
             ..Info::default()
         };
         Ok((self.obs(), info))
@@ -257,7 +257,7 @@ impl Env for PointReach {
             truncated,
             info: Info {
                 success,
-                ee_object_distance: distance,
+                extras: NamedValues::new().with("distance", distance),
                 elapsed_steps: self.steps,
                 ..Info::default()
             },

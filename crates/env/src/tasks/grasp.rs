@@ -12,7 +12,6 @@ use crate::arm::{
 use crate::config::{check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
-use crate::tasks::placement::{self, Area};
 use fairgrasp_sim::scene::Scene;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -248,7 +247,7 @@ impl Task for Grasp {
     }
 
     fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
-        placement::place_all(scene, &Area::of_scene(scene), rng)?;
+        scene.place_objects_at_random(rng)?;
         self.streak = Streak::default();
         self.grasp_paid = false;
         let tcp = scene.tcp_pose().translation.vector;

@@ -4,6 +4,5 @@
 pub mod classic;
 pub mod grasp;
 pub mod pick_place;
-pub mod placement;
 pub mod shapes;
 pub mod sort;

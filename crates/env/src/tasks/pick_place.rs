@@ -11,7 +11,6 @@ use crate::config::{check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
 use crate::tasks::grasp::{Streak, rich_observation};
-use crate::tasks::placement::{self, Area};
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::Scene;
 use rand::Rng;
@@ -166,9 +165,9 @@ impl Task for PickPlace {
     }
 
     fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
-        let area = Area::of_scene(scene);
-        placement::place_all(scene, &area, rng)?;
-        let [x, y] = area.sample_xy(rng);
+        scene.place_objects_at_random(rng)?;
+        let area = &scene.config().placement;
+        let [x, y] = [0, 1].map(|k| (area.center[k] + (rng.random::<f32>() - 0.5) * area.size[k]) as f64);
         let rest_z = scene.object_rest_height(0) - scene.base_pose().translation.z;
         let height = rng.random::<f64>() * self.settings.goal_max_height as f64;
         self.goal = Vector3::new(x, y, rest_z + height);

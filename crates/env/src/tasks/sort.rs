@@ -14,7 +14,6 @@ use crate::config::check_non_negative;
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
 use crate::tasks::grasp::rich_observation;
-use crate::tasks::placement::{self, Area};
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::{BinConfig, ObjectConfig, ObjectShape, Scene, SceneConfig};
 use rand::Rng;
@@ -188,6 +187,8 @@ impl Task for Sort {
 
     fn configure_scene(config: &SortConfig, scene: &mut SceneConfig) -> Result<()> {
         let t = &config.task;
+        scene.placement.center = t.object_area_center;
+        scene.placement.size = t.object_area_size;
         scene.objects = (0..t.num_objects)
             .map(|k| ObjectConfig {
                 name: format!("object{k}"),
@@ -227,15 +228,9 @@ impl Task for Sort {
     }
 
     fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
-        let t = &self.settings;
-        let area = Area {
-            center: t.object_area_center,
-            size: t.object_area_size,
-            yaw_range: std::f32::consts::PI,
-        };
-        placement::place_all(scene, &area, rng)?;
+        scene.place_objects_at_random(rng)?;
         for a in &mut self.assignment {
-            *a = rng.random_range(0..t.num_bins);
+            *a = rng.random_range(0..self.settings.num_bins);
         }
         self.paid.fill(false);
         self.sorted.fill(false);

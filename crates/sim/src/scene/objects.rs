@@ -358,6 +358,15 @@ impl Scene {
         half_height(&self.geometry(i)) as f64
     }
 
+    /// Half extents of object `i`'s bounding box in its own frame (m): what a policy needs to
+    /// know of an object's size.
+    pub fn object_half_extents(&self, i: usize) -> [f32; 3] {
+        let g = self.geometry(i);
+        let aabb = g.shape.compute_aabb(&g.local);
+        let half = (aabb.maxs - aabb.mins) / 2.0;
+        [half.x, half.y, half.z]
+    }
+
     /// World z of object `i`'s centre when it rests upright on the table (m).
     pub fn object_rest_height(&self, i: usize) -> f64 {
         self.table_top as f64 + self.object_half_height(i)
