@@ -2,7 +2,7 @@
 //! on held-out episodes.
 
 use anyhow::{Context, Result};
-use fairgrasp_rl::model::LoadedModel;
+use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{EVAL_SEED_BASE, HELD_OUT_SEED_BASE, evaluate};
 use std::path::PathBuf;
 
@@ -29,13 +29,15 @@ pub struct EvalArgs {
 
 pub fn run(args: &EvalArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    let mut model = LoadedModel::load(&args.model)
+    let mut policy = Policy::load(&args.model)
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
-    let env =
-        fairgrasp_env::EnvConfig::from_toml_str(&model.meta.env.to_toml_string(), &args.overrides)
-            .context("invalid --set")?;
+    let env = fairgrasp_env::EnvConfig::from_toml_str(
+        &grasp_env_config(&policy)?.to_toml_string(),
+        &args.overrides,
+    )
+    .context("invalid --set")?;
     let seeds = args.seed..args.seed.saturating_add(args.episodes as u64);
-    let meta = &model.meta;
+    let meta = policy.meta();
     let train_seeds = meta.train_seed..meta.train_seed + meta.n_envs.max(1) as u64;
     let overlaps = |r: &std::ops::Range<u64>| seeds.start < r.end && r.start < seeds.end;
     if overlaps(&train_seeds) || overlaps(&(EVAL_SEED_BASE..EVAL_SEED_BASE + 10_000)) {
@@ -45,13 +47,19 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         );
     }
     let started = std::time::Instant::now();
-    let result = evaluate(&mut |obs| model.act(obs), &env, args.episodes, args.seed)?;
+    let result = evaluate(
+        &mut |obs| policy.act(obs, true),
+        &env,
+        args.episodes,
+        args.seed,
+    )?;
     let seconds = started.elapsed().as_secs_f64();
-    let meta = &model.meta;
+    let dir = policy.dir().unwrap_or(&args.model).display().to_string();
+    let meta = policy.meta();
     if args.json {
         println!(
             "{{\"model\": {:?}, \"algo\": {:?}, \"trained_steps\": {}, \"episodes\": {}, \"seed\": {}, \"success_rate\": {}, \"mean_return\": {}, \"mean_length\": {}, \"seconds\": {seconds:.2}}}",
-            model.dir.display().to_string(),
+            dir,
             meta.algo,
             meta.num_timesteps,
             args.episodes,
@@ -63,11 +71,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     } else {
         println!(
             "{} ({}, trained {} steps), {} episodes from seed {}:",
-            model.dir.display(),
-            meta.algo,
-            meta.num_timesteps,
-            args.episodes,
-            args.seed
+            dir, meta.algo, meta.num_timesteps, args.episodes, args.seed
         );
         println!(
             "  success rate {:.1}% ({} of {})",
@@ -80,4 +84,20 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         println!("  ({seconds:.1} s)");
     }
     Ok(())
+}
+
+/// The grasp environment a model was trained on (the only one `evaluate` runs today).
+pub fn grasp_env_config(policy: &Policy) -> Result<fairgrasp_env::EnvConfig> {
+    let path = policy
+        .dir()
+        .map(|d| d.join("model.json").display().to_string())
+        .unwrap_or_else(|| "model.json".into());
+    anyhow::ensure!(
+        policy.env_id() == fairgrasp_env::ENV_ID,
+        "{path}: the model was trained on {}; evaluation runs {} only",
+        policy.env_id(),
+        fairgrasp_env::ENV_ID
+    );
+    serde_json::from_value(policy.env_config().clone())
+        .with_context(|| format!("{path}: the environment configuration"))
 }
