@@ -7,7 +7,7 @@
 //! output file is rewritten, the rest of the file is kept.
 
 use anyhow::{Context, Result, bail};
-use fairgrasp_rl::model::LoadedModel;
+use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary, evaluate};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -118,10 +118,12 @@ fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
     let summary: TrainSummary =
         serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
     let curve = eval_curve(&dir.join("progress.csv"))?;
-    let mut model = LoadedModel::load(&dir.join("best"))?;
-    let env = model.meta.env.clone();
+    let mut policy = Policy::load(&dir.join("best"))?;
+    let env = crate::eval_cmd::model_env(&policy, &[])?;
+    let env_id = policy.env_id().to_string();
     let held_out = evaluate(
-        &mut |obs| model.act(obs),
+        &mut |obs| policy.act(obs, true),
+        &env_id,
         &env,
         episodes,
         HELD_OUT_SEED_BASE,

@@ -1,8 +1,8 @@
 //! `fairgrasp env …`: list, check, exercise and measure the registered environments.
 
 use anyhow::{Context, Result};
-use fairgrasp_env::check::{CheckReport, check_env};
 use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::check::{CheckReport, check_env};
 use fairgrasp_env::config::{apply_override, read_table};
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::tasks::grasp::{GraspConfig, ObservationPreset, RewardKind};
@@ -167,7 +167,10 @@ fn variants(id: &str) -> Vec<(String, Vec<String>)> {
                 for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
                     for reward in [RewardKind::Sparse, RewardKind::Hybrid, RewardKind::Staged] {
                         let mut o = common.clone();
-                        o.push(format!("task.observation=\"{}\"", snake(&format!("{obs:?}"))));
+                        o.push(format!(
+                            "task.observation=\"{}\"",
+                            snake(&format!("{obs:?}"))
+                        ));
                         o.push(format!("reward.kind=\"{}\"", snake(&format!("{reward:?}"))));
                         out.push((o.join(" "), o));
                     }
@@ -211,7 +214,7 @@ fn check(args: &CheckArgs) -> Result<()> {
         let mut env = registry::make(&args.env.id, &table)?;
         let mut twin = registry::make(&args.env.id, &table)?;
         let report = check_env(&mut env, &mut twin, args.steps, args.seed);
-        print_report(&label, &report);
+        print_report(label, &report);
         if !report.passed() {
             failures += 1;
         }

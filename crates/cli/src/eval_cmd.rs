@@ -2,7 +2,7 @@
 //! on held-out episodes.
 
 use anyhow::{Context, Result};
-use fairgrasp_rl::model::LoadedModel;
+use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{EVAL_SEED_BASE, HELD_OUT_SEED_BASE, evaluate};
 use std::path::PathBuf;
 
@@ -29,13 +29,11 @@ pub struct EvalArgs {
 
 pub fn run(args: &EvalArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    let mut model = LoadedModel::load(&args.model)
+    let mut policy = Policy::load(&args.model)
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
-    let env =
-        fairgrasp_env::EnvConfig::from_toml_str(&model.meta.env.to_toml_string(), &args.overrides)
-            .context("invalid --set")?;
+    let env = model_env(&policy, &args.overrides)?;
     let seeds = args.seed..args.seed.saturating_add(args.episodes as u64);
-    let meta = &model.meta;
+    let meta = policy.meta();
     let train_seeds = meta.train_seed..meta.train_seed + meta.n_envs.max(1) as u64;
     let overlaps = |r: &std::ops::Range<u64>| seeds.start < r.end && r.start < seeds.end;
     if overlaps(&train_seeds) || overlaps(&(EVAL_SEED_BASE..EVAL_SEED_BASE + 10_000)) {
@@ -45,13 +43,21 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         );
     }
     let started = std::time::Instant::now();
-    let result = evaluate(&mut |obs| model.act(obs), &env, args.episodes, args.seed)?;
+    let env_id = policy.env_id().to_string();
+    let result = evaluate(
+        &mut |obs| policy.act(obs, true),
+        &env_id,
+        &env,
+        args.episodes,
+        args.seed,
+    )?;
     let seconds = started.elapsed().as_secs_f64();
-    let meta = &model.meta;
+    let dir = policy.dir().unwrap_or(&args.model).display().to_string();
+    let meta = policy.meta();
     if args.json {
         println!(
             "{{\"model\": {:?}, \"algo\": {:?}, \"trained_steps\": {}, \"episodes\": {}, \"seed\": {}, \"success_rate\": {}, \"mean_return\": {}, \"mean_length\": {}, \"seconds\": {seconds:.2}}}",
-            model.dir.display().to_string(),
+            dir,
             meta.algo,
             meta.num_timesteps,
             args.episodes,
@@ -63,11 +69,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     } else {
         println!(
             "{} ({}, trained {} steps), {} episodes from seed {}:",
-            model.dir.display(),
-            meta.algo,
-            meta.num_timesteps,
-            args.episodes,
-            args.seed
+            dir, meta.algo, meta.num_timesteps, args.episodes, args.seed
         );
         println!(
             "  success rate {:.1}% ({} of {})",
@@ -80,4 +82,21 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         println!("  ({seconds:.1} s)");
     }
     Ok(())
+}
+
+/// The settings of the environment a model was trained on (rebuilt through the registry by
+/// `evaluate`), with `overrides` applied and checked.
+pub fn model_env(policy: &Policy, overrides: &[String]) -> Result<toml::Table> {
+    let path = policy
+        .dir()
+        .map(|d| d.join("model.json").display().to_string())
+        .unwrap_or_else(|| "model.json".into());
+    let mut table = fairgrasp_rl::model::env_table(policy.env_config())
+        .with_context(|| format!("{path}: the environment settings"))?;
+    for item in overrides {
+        fairgrasp_env::config::apply_override(&mut table, item).context("invalid --set")?;
+    }
+    fairgrasp_env::registry::validate(policy.env_id(), &table)
+        .with_context(|| format!("invalid settings for {} (--set or {path})", policy.env_id()))?;
+    Ok(table)
 }

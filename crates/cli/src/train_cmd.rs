@@ -126,7 +126,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         }
         None => next_free_run_dir(
             Path::new("runs"),
-            &format!("{}_{}", config.algo.as_str(), short_env_name(&config.env_id)),
+            &format!(
+                "{}_{}",
+                config.algo.as_str(),
+                short_env_name(&config.env_id)
+            ),
         ),
     };
     println!(

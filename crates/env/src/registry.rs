@@ -46,7 +46,6 @@ fn no_settings(id: &str, table: &toml::Table) -> Result<()> {
     }
 }
 
-
 static SPECS: &[EnvSpec] = &[
     EnvSpec {
         id: "FaArmGrasp-v0",
@@ -101,7 +100,10 @@ pub fn spec(id: &str) -> Result<&'static EnvSpec> {
     SPECS.iter().find(|s| s.id == id).ok_or_else(|| {
         EnvError::config(
             "env_id",
-            format!("unknown environment `{id}`; registered: {}", ids().join(", ")),
+            format!(
+                "unknown environment `{id}`; registered: {}",
+                ids().join(", ")
+            ),
         )
     })
 }

@@ -1,9 +1,9 @@
 //! The grasp environment's contract: spaces, seeding, clipping, errors, rewards, termination.
 
 use fairgrasp_env::arm::ActionMode;
-use fairgrasp_env::tasks::grasp::{GraspConfig as EnvConfig, ObservationPreset, RewardKind};
 use fairgrasp_env::core::EpisodeEvent;
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::tasks::grasp::{GraspConfig as EnvConfig, ObservationPreset, RewardKind};
 use fairgrasp_env::{Env, EnvError, GraspEnv};
 use rand::SeedableRng;
 
@@ -70,7 +70,10 @@ fn spaces_match_the_configured_preset_and_mode() {
         let (o, info) = env.reset(Some(1)).unwrap();
         assert_eq!(o.len(), dim_obs);
         assert!(env.observation_space().contains(&o));
-        assert!(info.extras.is_empty(), "no randomisation, no parameters: {info:?}");
+        assert!(
+            info.extras.is_empty(),
+            "no randomisation, no parameters: {info:?}"
+        );
     }
     let env = env_with(|c| c.control.max_joint_delta = 0.1);
     assert_eq!(env.action_space().high[0], 0.1);
@@ -147,7 +150,10 @@ fn randomization_varies_the_episode_parameters_within_their_ranges() {
         assert!(edge >= 0.05 * ranges.object_scale[0] - 1e-6);
         assert!(edge <= 0.05 * ranges.object_scale[1] + 1e-6);
         let rest = scene.object_state(0).pose.translation.z - scene.table_top() as f64;
-        assert!((rest - edge as f64 / 2.0).abs() < 2e-3, "rest {rest} edge {edge}");
+        assert!(
+            (rest - edge as f64 / 2.0).abs() < 2e-3,
+            "rest {rest} edge {edge}"
+        );
         masses.push(mass);
     }
     assert!(masses.windows(2).any(|w| w[0] != w[1]));
@@ -275,7 +281,10 @@ fn an_object_that_leaves_the_table_terminates_with_a_penalty() {
 #[test]
 fn config_errors_name_the_key() {
     for (text, key) in [
-        ("[control]\nmax_joint_delta = 2.0\n", "control.max_joint_delta"),
+        (
+            "[control]\nmax_joint_delta = 2.0\n",
+            "control.max_joint_delta",
+        ),
         ("[control]\naction_mode = \"teleport\"\n", "teleport"),
         ("[reward]\ngrasp_bonus = 1.0\n", "grasp_bonus"),
         (
@@ -295,11 +304,14 @@ fn config_errors_name_the_key() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("max_episode_stepz"), "{err}");
-    let c = EnvConfig::from_toml_str("", &[
-        "control.action_mode=cartesian".into(),
-        "randomization.enabled=true".into(),
-        "scene.physics.substeps=4".into(),
-    ])
+    let c = EnvConfig::from_toml_str(
+        "",
+        &[
+            "control.action_mode=cartesian".into(),
+            "randomization.enabled=true".into(),
+            "scene.physics.substeps=4".into(),
+        ],
+    )
     .unwrap();
     assert_eq!(c.control.action_mode, ActionMode::Cartesian);
     assert!(c.randomization.enabled);
@@ -326,7 +338,10 @@ fn ansi_rendering_describes_the_state() {
 fn the_documented_env_config_is_the_default() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/env.toml");
     let text = std::fs::read_to_string(path).unwrap();
-    assert_eq!(EnvConfig::from_toml_str(&text, &[]).unwrap(), EnvConfig::default());
+    assert_eq!(
+        EnvConfig::from_toml_str(&text, &[]).unwrap(),
+        EnvConfig::default()
+    );
 }
 
 #[test]

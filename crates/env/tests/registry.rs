@@ -37,7 +37,10 @@ fn every_registered_env_builds_resets_and_steps_from_its_defaults() {
 fn the_arm_tasks_report_their_flags_by_name() {
     let expect = [
         ("FaArmGrasp-v0", vec!["grasped", "lift"]),
-        ("FaArmPickPlace-v0", vec!["grasped", "object_goal_distance", "placed"]),
+        (
+            "FaArmPickPlace-v0",
+            vec!["grasped", "object_goal_distance", "placed"],
+        ),
         ("FaArmSort-v0", vec!["objects_sorted", "fraction_sorted"]),
     ];
     for (id, names) in expect {
@@ -58,7 +61,10 @@ fn the_arm_tasks_report_their_flags_by_name() {
 fn unknown_ids_and_keys_are_errors_that_name_them() {
     let err = make("FaArmJuggle-v9", &toml::Table::new()).err().unwrap();
     let text = err.to_string();
-    assert!(text.contains("FaArmJuggle-v9") && text.contains("FaArmPickPlace-v0"), "{text}");
+    assert!(
+        text.contains("FaArmJuggle-v9") && text.contains("FaArmPickPlace-v0"),
+        "{text}"
+    );
 
     let err = make("FaArmGrasp-v0", &table("[task]\nmax_episode_stepz = 3"))
         .err()

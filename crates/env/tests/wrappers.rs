@@ -365,7 +365,10 @@ fn vec_normalize_learns_the_observation_and_return_statistics() {
                 );
                 assert_ne!(raw, normalised_terminal[i].clone().unwrap());
                 // Episode statistics stay in raw reward units.
-                assert_eq!(episodes[i].as_ref().unwrap().episode_return, episode_sums[i]);
+                assert_eq!(
+                    episodes[i].as_ref().unwrap().episode_return,
+                    episode_sums[i]
+                );
                 assert_eq!(episodes[i].as_ref().unwrap().length, 25);
                 episode_sums[i] = 0.0;
             } else {

@@ -4,7 +4,7 @@
 //! Like SB3's `BaseAlgorithm`, one driver ([`crate::train`]) runs evaluation, checkpoints, logs
 //! and resume for every algorithm; an algorithm only knows how to learn.
 
-use crate::ppo::Result;
+use crate::error::{Result, RlError};
 use candle_core::Tensor;
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand_chacha::ChaCha8Rng;
@@ -57,7 +57,6 @@ pub trait Algorithm {
 /// Copies `weights` into the variables of `varmap`, checking every name and shape first so that
 /// a mismatched file changes nothing.
 pub fn load_varmap(varmap: &candle_nn::VarMap, weights: &TensorMap) -> Result<()> {
-    use crate::ppo::RlError;
     let data = varmap.data().lock().expect("varmap lock");
     let mut names: Vec<&String> = data.keys().collect();
     names.sort();
@@ -120,7 +119,6 @@ pub fn rng_state(rng: &ChaCha8Rng, prefix: &str) -> Result<TensorMap> {
 
 /// Rebuilds a stream saved by [`rng_state`].
 pub fn rng_from_state(state: &TensorMap, prefix: &str) -> Result<ChaCha8Rng> {
-    use crate::ppo::RlError;
     use rand::SeedableRng;
     let get = |name: &str, len: usize| -> Result<Vec<u32>> {
         let key = format!("{prefix}rng.{name}");

@@ -1,7 +1,9 @@
 //! fairgrasp-rl: reinforcement learning for the fairgrasp environments.
 //!
 //! Layer 3 of fairgrasp (sim → env → **rl** → deploy). Shared machinery lives here once —
-//! [`buffers`] (rollout buffer with GAE, replay buffer), [`logger`] (TensorBoard event files and
+//! [`buffers`] (rollout buffer with GAE, replay buffer), [`distributions`] (the Gaussian and the
+//! tanh-squashed Gaussian), [`policies`] (networks built through a feature extractor, and
+//! [`policies::Policy`] for acting with a saved model), [`logger`] (TensorBoard event files and
 //! CSV), [`save_util`] (atomic writes) — and each algorithm is a thin module on top.
 //!
 //! Networks run on [candle](https://github.com/huggingface/candle) (CPU); a PPO update on our
@@ -10,9 +12,12 @@
 
 pub mod algorithm;
 pub mod buffers;
+pub mod distributions;
+pub mod error;
 pub mod logger;
 pub mod model;
 pub mod nn;
+pub mod policies;
 pub mod ppo;
 pub mod sac;
 pub mod save_util;

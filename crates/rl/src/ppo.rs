@@ -10,13 +10,14 @@ use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
 };
 use crate::buffers::RolloutBuffer;
-pub use crate::nn::standard_normal;
-use crate::nn::{Activation, Adam, Mlp};
-use candle_core::{D, DType, Device, Tensor, Var};
-use candle_nn::{VarBuilder, VarMap};
-use fairgrasp_env::{EnvError, VecStep, VectorEnv};
+use crate::error::{Result, RlError};
+use crate::nn::{Activation, Adam};
+use crate::policies::actor_critic::ActorCritic;
+use crate::policies::features::FeaturesConfig;
+use candle_core::{DType, Device, Tensor};
+use fairgrasp_env::{VecStep, VectorEnv};
+use rand::SeedableRng;
 use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -57,6 +58,8 @@ pub struct PpoConfig {
     pub activation: Activation,
     /// Initial log standard deviation of the Gaussian policy.
     pub log_std_init: f32,
+    /// What the policy and value heads read (`kind = "flatten"`: the observation itself).
+    pub features: FeaturesConfig,
 }
 
 impl Default for PpoConfig {
@@ -79,160 +82,8 @@ impl Default for PpoConfig {
             net_arch: vec![64, 64],
             activation: Activation::Tanh,
             log_std_init: 0.0,
+            features: FeaturesConfig::Flatten {},
         }
-    }
-}
-
-/// Errors of the learning code.
-#[derive(Debug, thiserror::Error)]
-pub enum RlError {
-    #[error(transparent)]
-    Env(#[from] EnvError),
-    #[error("network: {0}")]
-    Candle(#[from] candle_core::Error),
-    #[error("invalid setting `{key}`: {problem}")]
-    Config { key: String, problem: String },
-    /// A saved model or checkpoint that cannot be used (corrupt, incomplete, mismatched).
-    #[error("{0}")]
-    Model(String),
-    #[error("{0}")]
-    Other(String),
-}
-
-pub type Result<T, E = RlError> = std::result::Result<T, E>;
-
-const HALF_LN_2PI: f32 = 0.918_938_5;
-
-/// A Gaussian policy with a state-independent standard deviation, and a separate value network.
-pub struct ActorCritic {
-    pub varmap: VarMap,
-    policy: Mlp,
-    value: Mlp,
-    log_std: Var,
-    pub obs_dim: usize,
-    pub act_dim: usize,
-    device: Device,
-}
-
-/// What the policy decided for a batch of observations.
-#[derive(Clone, Debug, Default)]
-pub struct PolicyOutput {
-    /// Sampled (or, deterministically, mean) actions, unclipped.
-    pub actions: Vec<f32>,
-    pub log_probs: Vec<f32>,
-    pub values: Vec<f32>,
-}
-
-impl ActorCritic {
-    /// The networks, with weights drawn from `rng` (see [`Mlp::init_weights`]).
-    pub fn new(
-        obs_dim: usize,
-        act_dim: usize,
-        config: &PpoConfig,
-        rng: &mut impl Rng,
-    ) -> Result<Self> {
-        let device = Device::Cpu;
-        let varmap = VarMap::new();
-        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &device);
-        let policy = Mlp::new(
-            &vb.pp("pi"),
-            obs_dim,
-            &config.net_arch,
-            act_dim,
-            config.activation,
-            0.01,
-        )?;
-        let value = Mlp::new(
-            &vb.pp("vf"),
-            obs_dim,
-            &config.net_arch,
-            1,
-            config.activation,
-            1.0,
-        )?;
-        vb.get_with_hints(
-            act_dim,
-            "log_std",
-            candle_nn::Init::Const(config.log_std_init as f64),
-        )?;
-        let log_std = varmap
-            .data()
-            .lock()
-            .expect("varmap lock")
-            .get("log_std")
-            .cloned()
-            .ok_or_else(|| RlError::Other("log_std parameter missing".into()))?;
-        policy.init_weights(&varmap, rng)?;
-        value.init_weights(&varmap, rng)?;
-        Ok(Self {
-            varmap,
-            policy,
-            value,
-            log_std,
-            obs_dim,
-            act_dim,
-            device,
-        })
-    }
-
-    fn obs_tensor(&self, obs: &[f32]) -> Result<Tensor> {
-        Ok(Tensor::from_slice(
-            obs,
-            (obs.len() / self.obs_dim, self.obs_dim),
-            &self.device,
-        )?)
-    }
-
-    /// Means of the action distribution for a batch of observations.
-    pub fn mean_actions(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        Ok(self
-            .policy
-            .forward(&self.obs_tensor(obs)?)?
-            .flatten_all()?
-            .to_vec1()?)
-    }
-
-    /// State values for a batch of observations.
-    pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        Ok(self
-            .value
-            .forward(&self.obs_tensor(obs)?)?
-            .flatten_all()?
-            .to_vec1()?)
-    }
-
-    /// Samples actions (or takes the means when `deterministic`), with log-probabilities and
-    /// values. The noise comes from `rng`, so a seeded run is reproducible.
-    pub fn act(
-        &self,
-        obs: &[f32],
-        deterministic: bool,
-        rng: &mut impl Rng,
-    ) -> Result<PolicyOutput> {
-        let means = self.mean_actions(obs)?;
-        let values = self.values(obs)?;
-        let log_std: Vec<f32> = self.log_std.as_tensor().to_vec1()?;
-        let n = means.len() / self.act_dim;
-        let mut actions = Vec::with_capacity(means.len());
-        let mut log_probs = Vec::with_capacity(n);
-        for row in means.chunks(self.act_dim) {
-            let mut lp = 0.0;
-            for (k, mean) in row.iter().enumerate() {
-                let z = if deterministic {
-                    0.0
-                } else {
-                    standard_normal(rng)
-                };
-                actions.push(mean + log_std[k].exp() * z);
-                lp += -0.5 * z * z - log_std[k] - HALF_LN_2PI;
-            }
-            log_probs.push(lp);
-        }
-        Ok(PolicyOutput {
-            actions,
-            log_probs,
-            values,
-        })
     }
 }
 
@@ -393,12 +244,9 @@ impl Ppo {
                 }
                 let returns = ret_all.index_select(&idx, 0)?;
 
-                // log π(a|s) of the current policy.
-                let mean = self.policy.policy.forward(&obs)?;
-                let log_std = self.policy.log_std.as_tensor();
-                let z = actions.sub(&mean)?.broadcast_mul(&log_std.neg()?.exp()?)?;
-                let logp = ((z.sqr()? * -0.5)?.broadcast_sub(log_std)? - HALF_LN_2PI as f64)?
-                    .sum(D::Minus1)?;
+                // log π(a|s) and V(s) of the current policy.
+                let (dist, values) = self.policy.forward(&obs)?;
+                let logp = dist.log_prob(&actions)?;
                 let log_ratio = (&logp - &old_logp)?;
                 let ratio = log_ratio.exp()?;
 
@@ -408,7 +256,6 @@ impl Ppo {
                 let policy_loss = surrogate1.minimum(&surrogate2)?.mean_all()?.neg()?;
 
                 // Value loss, optionally clipped around the old values.
-                let values = self.policy.value.forward(&obs)?.squeeze(1)?;
                 let value_loss = match c.clip_range_vf {
                     None => (&values - &returns)?.sqr()?.mean_all()?,
                     Some(eps) => {
@@ -419,9 +266,7 @@ impl Ppo {
                         a.maximum(&b)?.mean_all()?
                     }
                 };
-                // Entropy of a diagonal Gaussian: Σ (log σ + ½ ln 2πe).
-                let entropy = (log_std.sum_all()?
-                    + (self.policy.act_dim as f32 * (0.5 + HALF_LN_2PI)) as f64)?;
+                let entropy = dist.entropy()?.mean_all()?;
                 let loss = ((&policy_loss + (&value_loss * c.vf_coef as f64)?)?
                     - (&entropy * c.ent_coef as f64)?)?;
 
@@ -462,8 +307,7 @@ impl Ppo {
         stats.grad_norm = gn_sum / n;
         stats.std = self
             .policy
-            .log_std
-            .as_tensor()
+            .log_std()
             .exp()?
             .mean_all()?
             .to_scalar::<f32>()?;
@@ -506,7 +350,7 @@ impl Algorithm for Ppo {
     }
 
     fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
-        Ok(self.policy.act(obs, deterministic, &mut self.rng)?.actions)
+        self.policy.predict(obs, deterministic, &mut self.rng)
     }
 
     fn weights(&self) -> Result<TensorMap> {

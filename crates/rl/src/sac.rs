@@ -18,10 +18,12 @@ use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
 };
 use crate::buffers::{ReplayBuffer, ReplaySample};
-use crate::nn::standard_normal;
-use crate::nn::{Activation, Adam, Mlp};
-use crate::ppo::{Result, RlError};
-use candle_core::{D, DType, Device, Tensor, Var};
+use crate::distributions::standard_normal_tensor;
+use crate::error::{Result, RlError};
+use crate::nn::{Activation, Adam};
+use crate::policies::features::FeaturesConfig;
+use crate::policies::sac_policy::{SacActor, SacPolicy};
+use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand::{Rng, SeedableRng};
@@ -54,6 +56,8 @@ pub struct SacConfig {
     pub activation: Activation,
     /// Save the replay buffer in checkpoints, so a resumed run keeps its experience.
     pub save_replay_buffer: bool,
+    /// What the actor and the critics read (`kind = "flatten"`: the observation itself).
+    pub features: FeaturesConfig,
 }
 
 impl Default for SacConfig {
@@ -72,6 +76,7 @@ impl Default for SacConfig {
             net_arch: vec![256, 256],
             activation: Activation::Relu,
             save_replay_buffer: true,
+            features: FeaturesConfig::Flatten {},
         }
     }
 }
@@ -133,145 +138,18 @@ pub(crate) fn validate(c: &SacConfig, _n_envs: usize) -> Result<()> {
     Ok(())
 }
 
-const HALF_LN_2PI: f32 = 0.918_938_5;
-/// The actor's log standard deviation is squashed into this range (CleanRL's bounds).
-const LOG_STD_MIN: f64 = -5.0;
-const LOG_STD_MAX: f64 = 2.0;
-/// Output-layer gains (see [`Mlp::new`]): small for the actor, so the first policy is centred
-/// with σ = e^-1.5, as in CleanRL; ordinary for the critics.
-const ACTOR_OUTPUT_GAIN: f64 = 0.01;
-const CRITIC_OUTPUT_GAIN: f64 = 1.0;
-
-/// `log_std` squashed smoothly into `[LOG_STD_MIN, LOG_STD_MAX]` (a hard clamp would stop its
-/// gradient at the bounds).
-fn squash_log_std(raw: &Tensor) -> candle_core::Result<Tensor> {
-    let half_range = 0.5 * (LOG_STD_MAX - LOG_STD_MIN);
-    raw.tanh()?.affine(half_range, LOG_STD_MIN + half_range)
-}
-
-/// Actions `tanh(μ + σ ε)` for standard normal noise `ε`, and their log-probabilities
-/// `Σ [log N(u; μ, σ) − log(1 − tanh(u)² + 1e-6)]` (the change of variables through tanh; the
-/// 1e-6 keeps the logarithm finite where tanh saturates). Reparameterised: gradients flow to
-/// `mean` and `log_std`. `mean`, `log_std`, `eps` are `batch × act_dim`; the log-probabilities
-/// are `batch`.
-fn squashed_gaussian(
-    mean: &Tensor,
-    log_std: &Tensor,
-    eps: &Tensor,
-) -> candle_core::Result<(Tensor, Tensor)> {
-    let u = (mean + (log_std.exp()? * eps)?)?;
-    let actions = u.tanh()?;
-    // log N(u; μ, σ) = −½ ε² − log σ − ½ ln 2π, since (u − μ)/σ = ε.
-    let gaussian = ((eps.sqr()? * -0.5)? - log_std)?;
-    let jacobian = actions.sqr()?.affine(-1.0, 1.0 + 1e-6)?.log()?;
-    let log_probs =
-        ((gaussian - jacobian)?.sum(D::Minus1)? - (HALF_LN_2PI * eps.dim(1)? as f32) as f64)?;
-    Ok((actions, log_probs))
-}
-
-/// The squashed Gaussian policy: one MLP gives each action dimension's mean and log std.
-struct Actor {
-    varmap: VarMap,
-    net: Mlp,
-    act_dim: usize,
-}
-
-impl Actor {
-    fn new(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
-        let varmap = VarMap::new();
-        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-        let net = Mlp::new(
-            &vb.pp("actor"),
-            obs_dim,
-            &config.net_arch,
-            2 * act_dim,
-            config.activation,
-            ACTOR_OUTPUT_GAIN,
-        )?;
-        Ok(Self {
-            varmap,
-            net,
-            act_dim,
-        })
-    }
-
-    /// Means and (squashed) log standard deviations, each `batch × act_dim`.
-    fn mean_log_std(&self, obs: &Tensor) -> candle_core::Result<(Tensor, Tensor)> {
-        let out = self.net.forward(obs)?;
-        let mean = out.narrow(1, 0, self.act_dim)?;
-        let log_std = squash_log_std(&out.narrow(1, self.act_dim, self.act_dim)?)?;
-        Ok((mean, log_std))
-    }
-
-    /// Sampled actions and their log-probabilities for the noise `eps` (`batch × act_dim`).
-    fn sample(&self, obs: &Tensor, eps: &Tensor) -> candle_core::Result<(Tensor, Tensor)> {
-        let (mean, log_std) = self.mean_log_std(obs)?;
-        squashed_gaussian(&mean, &log_std, eps)
-    }
-}
-
-/// Twin Q networks on `[observation, action]` (Fujimoto et al. 2018: the minimum of two
-/// critics curbs the overestimation a single one accumulates).
-struct Critics {
-    varmap: VarMap,
-    qf1: Mlp,
-    qf2: Mlp,
-}
-
-impl Critics {
-    fn new(prefix: &str, obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
-        let varmap = VarMap::new();
-        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp(prefix);
-        let critic = |name: &str| {
-            Mlp::new(
-                &vb.pp(name),
-                obs_dim + act_dim,
-                &config.net_arch,
-                1,
-                config.activation,
-                CRITIC_OUTPUT_GAIN,
-            )
-        };
-        Ok(Self {
-            qf1: critic("qf1")?,
-            qf2: critic("qf2")?,
-            varmap,
-        })
-    }
-
-    /// Both critics' values, each `batch`.
-    fn q(&self, obs: &Tensor, actions: &Tensor) -> candle_core::Result<(Tensor, Tensor)> {
-        let x = Tensor::cat(&[obs, actions], 1)?;
-        Ok((
-            self.qf1.forward(&x)?.squeeze(1)?,
-            self.qf2.forward(&x)?.squeeze(1)?,
-        ))
-    }
-
-    fn min_q(&self, obs: &Tensor, actions: &Tensor) -> candle_core::Result<Tensor> {
-        let (q1, q2) = self.q(obs, actions)?;
-        q1.minimum(&q2)
-    }
-}
-
-/// Every network of the learner. Variable names carry their group's prefix (`actor.`,
-/// `critic.`, `critic_target.`, `log_alpha`), so saved weights and errors name tensors
-/// unambiguously.
-struct Networks {
-    actor: Actor,
-    critic: Critics,
-    critic_target: Critics,
+/// Every network of the learner: the policy's and log α. Variable names carry their group's
+/// prefix (`actor.`, `critic.`, `critic_target.`, `log_alpha`), so saved weights and errors
+/// name tensors unambiguously.
+pub(crate) struct Networks {
+    pub(crate) policy: SacPolicy,
     /// log α, when it is learnt (`ent_coef = None`).
     log_alpha: Option<(VarMap, Var)>,
-    /// (online, target) critic variables, for the Polyak update.
-    target_pairs: Vec<(Var, Var)>,
 }
 
 impl Networks {
-    fn new(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
-        let actor = Actor::new(obs_dim, act_dim, config)?;
-        let critic = Critics::new("critic", obs_dim, act_dim, config)?;
-        let critic_target = Critics::new("critic_target", obs_dim, act_dim, config)?;
+    /// The networks with zero weights (log α at its initial value).
+    pub(crate) fn zeroed(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
         let log_alpha = match config.ent_coef {
             Some(_) => None,
             None => {
@@ -283,67 +161,64 @@ impl Networks {
                 Some((varmap, var))
             }
         };
-        let target_pairs = {
-            let online = critic.varmap.data().lock().expect("varmap lock");
-            let target = critic_target.varmap.data().lock().expect("varmap lock");
-            online
-                .iter()
-                .map(|(name, v)| {
-                    let target_name = format!("critic_target.{}", &name["critic.".len()..]);
-                    let t = target.get(&target_name).cloned().ok_or_else(|| {
-                        RlError::Other(format!("target critic lacks `{target_name}`"))
-                    })?;
-                    Ok((v.clone(), t))
-                })
-                .collect::<Result<_>>()?
-        };
-        let nets = Self {
-            actor,
-            critic,
-            critic_target,
+        Ok(Self {
+            policy: SacPolicy::zeroed(obs_dim, act_dim, config)?,
             log_alpha,
-            target_pairs,
-        };
-        nets.copy_critic_to_target()?;
-        Ok(nets)
+        })
     }
 
     /// The groups of variables with their name prefixes, in a fixed order.
     fn groups(&self) -> Vec<(&'static str, &VarMap)> {
-        let mut groups = vec![
-            ("actor.", &self.actor.varmap),
-            ("critic.", &self.critic.varmap),
-            ("critic_target.", &self.critic_target.varmap),
-        ];
+        let mut groups = self.policy.groups().to_vec();
         if let Some((varmap, _)) = &self.log_alpha {
             groups.push(("log_alpha", varmap));
         }
         groups
     }
 
-    fn copy_critic_to_target(&self) -> Result<()> {
-        for (online, target) in &self.target_pairs {
-            target.set(online.as_tensor())?;
+    fn weights(&self) -> TensorMap {
+        let mut out = TensorMap::new();
+        for (_, varmap) in self.groups() {
+            out.extend(varmap_tensors(varmap, ""));
+        }
+        out
+    }
+
+    /// Loads weights saved by [`Self::weights`]; `obs_dim`, `act_dim` and `config` must be
+    /// those the networks were built with. A missing, extra or mis-shaped tensor is an error
+    /// that names it, and changes nothing.
+    pub(crate) fn load_weights(
+        &self,
+        weights: &TensorMap,
+        obs_dim: usize,
+        act_dim: usize,
+        config: &SacConfig,
+    ) -> Result<()> {
+        let groups = self.groups();
+        let mut parts = vec![TensorMap::new(); groups.len()];
+        for (name, t) in weights {
+            let Some(g) = groups.iter().position(|(p, _)| name.starts_with(p)) else {
+                return Err(RlError::Model(format!(
+                    "the weights hold tensor `{name}`, which this network does not have"
+                )));
+            };
+            parts[g].insert(name.clone(), t.clone());
+        }
+        // `load_varmap` checks one group before changing it; trying every group on scratch
+        // networks first means a mismatch in a later group leaves the earlier ones untouched.
+        let scratch = Networks::zeroed(obs_dim, act_dim, config)?;
+        for ((_, varmap), part) in scratch.groups().into_iter().zip(&parts) {
+            load_varmap(varmap, part)?;
+        }
+        for ((_, varmap), part) in groups.into_iter().zip(&parts) {
+            load_varmap(varmap, part)?;
         }
         Ok(())
     }
 
-    /// Polyak averaging: `target ← (1 − τ) target + τ online`.
-    fn soft_update(&self, tau: f32) -> Result<()> {
-        let tau = tau as f64;
-        for (online, target) in &self.target_pairs {
-            let mixed = ((target.as_tensor() * (1.0 - tau))? + (online.as_tensor() * tau)?)?;
-            target.set(&mixed)?;
-        }
-        Ok(())
-    }
-
-    /// Draws the actor's and critics' weights from `rng` and copies the critics to the targets.
-    fn init_weights(&self, rng: &mut ChaCha8Rng) -> Result<()> {
-        self.actor.net.init_weights(&self.actor.varmap, rng)?;
-        self.critic.qf1.init_weights(&self.critic.varmap, rng)?;
-        self.critic.qf2.init_weights(&self.critic.varmap, rng)?;
-        self.copy_critic_to_target()
+    /// The actor alone (for acting).
+    pub(crate) fn into_actor(self) -> SacActor {
+        self.policy.actor
     }
 }
 
@@ -405,12 +280,12 @@ impl Sac {
             )));
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let nets = Networks::new(obs_dim, act_dim, &config)?;
-        nets.init_weights(&mut rng)?;
+        let nets = Networks::zeroed(obs_dim, act_dim, &config)?;
+        nets.policy.init_weights(&mut rng)?;
         let lr = config.learning_rate;
         Ok(Self {
-            actor_opt: Adam::new(&nets.actor.varmap, lr)?,
-            critic_opt: Adam::new(&nets.critic.varmap, lr)?,
+            actor_opt: Adam::new(&nets.policy.actor.varmap, lr)?,
+            critic_opt: Adam::new(&nets.policy.critic.varmap, lr)?,
             alpha_opt: match &nets.log_alpha {
                 Some((varmap, _)) => Some(Adam::new(varmap, lr)?),
                 None => None,
@@ -451,14 +326,7 @@ impl Sac {
     /// `rows × act_dim` standard normal noise from the learner's stream (not candle's unseeded
     /// one), so a seeded run is reproducible.
     fn noise(&mut self, rows: usize) -> Result<Tensor> {
-        let values: Vec<f32> = (0..rows * self.act_dim)
-            .map(|_| standard_normal(&mut self.rng))
-            .collect();
-        Ok(Tensor::from_vec(
-            values,
-            (rows, self.act_dim),
-            &Device::Cpu,
-        )?)
+        Ok(standard_normal_tensor(&mut self.rng, rows, self.act_dim)?)
     }
 
     /// One gradient step of the critics, the actor and α on a minibatch from the replay buffer.
@@ -477,12 +345,21 @@ impl Sac {
 
         // Critic target from the next observations, with the current policy and α; no gradient.
         let next_eps = self.noise(b)?;
-        let (next_actions, next_log_probs) = self.nets.actor.sample(&next_obs, &next_eps)?;
-        let next_q =
-            (self.nets.critic_target.min_q(&next_obs, &next_actions)? - (next_log_probs * alpha)?)?;
+        let (next_actions, next_log_probs) = self
+            .nets
+            .policy
+            .actor
+            .distribution(&next_obs)?
+            .sample(&next_eps)?;
+        let next_q = (self
+            .nets
+            .policy
+            .critic_target
+            .min_q(&next_obs, &next_actions)?
+            - (next_log_probs * alpha)?)?;
         let target = (rewards + ((not_done * next_q)? * gamma)?)?.detach();
 
-        let (q1, q2) = self.nets.critic.q(&obs, &actions)?;
+        let (q1, q2) = self.nets.policy.critic.q(&obs, &actions)?;
         let critic_loss =
             (((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)? * 0.5)?;
         self.critic_opt.backward_step(&critic_loss, 0.0)?;
@@ -490,8 +367,8 @@ impl Sac {
         // Actor against the critics just updated (as CleanRL and SB3 do). The backward pass also
         // reaches the critics' variables, but only the actor's optimiser steps.
         let eps = self.noise(b)?;
-        let (pi_actions, log_probs) = self.nets.actor.sample(&obs, &eps)?;
-        let q_pi = self.nets.critic.min_q(&obs, &pi_actions)?;
+        let (pi_actions, log_probs) = self.nets.policy.actor.distribution(&obs)?.sample(&eps)?;
+        let q_pi = self.nets.policy.critic.min_q(&obs, &pi_actions)?;
         let actor_loss = ((&log_probs * alpha)? - q_pi)?.mean_all()?;
         self.actor_opt.backward_step(&actor_loss, 0.0)?;
 
@@ -505,7 +382,7 @@ impl Sac {
             ent_coef_loss = loss.to_scalar::<f32>()?;
         }
 
-        self.nets.soft_update(self.config.tau)?;
+        self.nets.policy.soft_update(self.config.tau)?;
         self.n_updates += 1;
         Ok(StepStats {
             actor_loss: actor_loss.to_scalar()?,
@@ -640,53 +517,19 @@ impl Algorithm for Sac {
     }
 
     fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
-        if !obs.len().is_multiple_of(self.obs_dim) {
-            return Err(RlError::Other(format!(
-                "{} observation values are not rows of {}",
-                obs.len(),
-                self.obs_dim
-            )));
-        }
-        let rows = obs.len() / self.obs_dim;
-        let obs = Tensor::from_slice(obs, (rows, self.obs_dim), &Device::Cpu)?;
-        let actions = if deterministic {
-            self.nets.actor.mean_log_std(&obs)?.0.tanh()?
-        } else {
-            let eps = self.noise(rows)?;
-            self.nets.actor.sample(&obs, &eps)?.0
-        };
-        Ok(actions.flatten_all()?.to_vec1()?)
+        self.nets
+            .policy
+            .actor
+            .predict(obs, deterministic, &mut self.rng)
     }
 
     fn weights(&self) -> Result<TensorMap> {
-        let mut out = TensorMap::new();
-        for (_, varmap) in self.nets.groups() {
-            out.extend(varmap_tensors(varmap, ""));
-        }
-        Ok(out)
+        Ok(self.nets.weights())
     }
 
     fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
-        let groups = self.nets.groups();
-        let mut parts = vec![TensorMap::new(); groups.len()];
-        for (name, t) in weights {
-            let Some(g) = groups.iter().position(|(p, _)| name.starts_with(p)) else {
-                return Err(RlError::Model(format!(
-                    "the weights hold tensor `{name}`, which this network does not have"
-                )));
-            };
-            parts[g].insert(name.clone(), t.clone());
-        }
-        // `load_varmap` checks one group before changing it; trying every group on scratch
-        // networks first means a mismatch in a later group leaves the earlier ones untouched.
-        let scratch = Networks::new(self.obs_dim, self.act_dim, &self.config)?;
-        for ((_, varmap), part) in scratch.groups().into_iter().zip(&parts) {
-            load_varmap(varmap, part)?;
-        }
-        for ((_, varmap), part) in groups.into_iter().zip(&parts) {
-            load_varmap(varmap, part)?;
-        }
-        Ok(())
+        self.nets
+            .load_weights(weights, self.obs_dim, self.act_dim, &self.config)
     }
 
     fn training_state(&self) -> Result<TensorMap> {
@@ -730,8 +573,8 @@ impl Algorithm for Sac {
                 .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
             Ok(opt)
         };
-        let actor_opt = load_opt(&self.nets.actor.varmap, "actor_opt.")?;
-        let critic_opt = load_opt(&self.nets.critic.varmap, "critic_opt.")?;
+        let actor_opt = load_opt(&self.nets.policy.actor.varmap, "actor_opt.")?;
+        let critic_opt = load_opt(&self.nets.policy.critic.varmap, "critic_opt.")?;
         let alpha_opt = match &self.nets.log_alpha {
             Some((varmap, _)) => Some(load_opt(varmap, "alpha_opt.")?),
             None => None,
@@ -763,7 +606,8 @@ impl Algorithm for Sac {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fairgrasp_env::classic::Pendulum;
+    use crate::nn::standard_normal;
+    use fairgrasp_env::tasks::classic::Pendulum;
     use fairgrasp_env::wrappers::RescaleAction;
     use fairgrasp_env::{Env, VecEnv};
     use std::collections::HashMap;
@@ -800,55 +644,19 @@ mod tests {
     }
 
     #[test]
-    fn squashed_log_prob_matches_a_numeric_density() {
-        let dev = &Device::Cpu;
-        let (mean, log_std, eps) = (
-            [0.3f32, -1.2, 0.8],
-            [-0.5f32, 0.4, -1.0],
-            [0.7f32, -0.2, 1.5],
-        );
-        let t = |v: [f32; 3]| Tensor::new(&[v], dev).unwrap();
-        let (actions, log_probs) = squashed_gaussian(&t(mean), &t(log_std), &t(eps)).unwrap();
-        let actions: Vec<f32> = actions.flatten_all().unwrap().to_vec1().unwrap();
-        let log_prob = log_probs.to_vec1::<f32>().unwrap()[0] as f64;
-        // The density of a = tanh(u), u ~ N(μ, σ²): p(u) / |da/du|, with the derivative taken by
-        // central differences.
-        let mut want = 0.0f64;
-        for k in 0..3 {
-            let (m, s) = (mean[k] as f64, (log_std[k] as f64).exp());
-            let u = m + s * eps[k] as f64;
-            assert!((actions[k] as f64 - u.tanh()).abs() < 1e-6);
-            let density =
-                (-0.5 * ((u - m) / s).powi(2)).exp() / (s * (2.0 * std::f64::consts::PI).sqrt());
-            let h = 1e-5;
-            let slope = ((u + h).tanh() - (u - h).tanh()) / (2.0 * h);
-            want += (density / slope).ln();
-        }
-        assert!(
-            (log_prob - want).abs() < 1e-4,
-            "log π {log_prob}, numerically {want}"
-        );
-
-        // The log std stays within its bounds, reaching them only asymptotically.
-        let raw = Tensor::new(&[-100.0f32, 0.0, 100.0], dev).unwrap();
-        let squashed: Vec<f32> = squash_log_std(&raw).unwrap().to_vec1().unwrap();
-        assert_eq!(squashed, [-5.0, -1.5, 2.0]);
-    }
-
-    #[test]
     fn polyak_update_moves_targets_by_tau() {
         let sac = Sac::new(small_config(), 3, 1, 2, 0).unwrap();
         // Make the online critics differ from their targets.
-        for (online, _) in &sac.nets.target_pairs {
+        for (online, _) in &sac.nets.policy.target_pairs {
             online
                 .set(&online.as_tensor().randn_like(0.0, 1.0).unwrap())
                 .unwrap();
         }
-        let before = snapshot(&varmap_tensors(&sac.nets.critic_target.varmap, ""));
-        let online = snapshot(&varmap_tensors(&sac.nets.critic.varmap, ""));
+        let before = snapshot(&varmap_tensors(&sac.nets.policy.critic_target.varmap, ""));
+        let online = snapshot(&varmap_tensors(&sac.nets.policy.critic.varmap, ""));
         let tau = 0.25;
-        sac.nets.soft_update(tau).unwrap();
-        let after = snapshot(&varmap_tensors(&sac.nets.critic_target.varmap, ""));
+        sac.nets.policy.soft_update(tau).unwrap();
+        let after = snapshot(&varmap_tensors(&sac.nets.policy.critic_target.varmap, ""));
         assert_eq!(after.len(), online.len());
         for (name, t_after) in &after {
             let o = &online[&name.replacen("critic_target.", "critic.", 1)];
@@ -864,7 +672,7 @@ mod tests {
         // The online critics are untouched.
         assert_eq!(
             online,
-            snapshot(&varmap_tensors(&sac.nets.critic.varmap, ""))
+            snapshot(&varmap_tensors(&sac.nets.policy.critic.varmap, ""))
         );
     }
 

@@ -8,11 +8,13 @@
 //! `trainer_state.json`: what [`resume`] needs to continue).
 
 use crate::algorithm::{Algorithm, TensorMap};
+use crate::error::{Result, RlError};
 use crate::logger::{CsvLogger, TensorBoardWriter};
 use crate::model::{
     ModelMeta, load_tensors, replace_dir, save_model, save_tensors, write_model_files,
 };
-use crate::ppo::{Ppo, PpoConfig, Result, RlError};
+use crate::policies::Policy;
+use crate::ppo::{Ppo, PpoConfig};
 use crate::sac::{Sac, SacConfig};
 use crate::save_util::write_atomic;
 use fairgrasp_env::wrappers::{
@@ -453,6 +455,7 @@ fn run<A: Algorithm>(
     }
     let mut tb = TensorBoardWriter::create(&run_dir.join("tb")).map_err(io)?;
 
+    let env_json = serde_json::to_value(&config.env).map_err(|e| RlError::Other(e.to_string()))?;
     let meta = |algo: &A, venv: &VecNormalize<_>| ModelMeta {
         format_version: crate::model::FORMAT_VERSION,
         algo: algo.name().into(),
@@ -460,7 +463,8 @@ fn run<A: Algorithm>(
         act_dim,
         ppo: (config.algo == Algo::Ppo).then(|| config.ppo.clone()),
         sac: (config.algo == Algo::Sac).then(|| config.sac.clone()),
-        env: config.env.clone(),
+        env_id: config.env_id.clone(),
+        env: env_json.clone(),
         normalization: config.normalize.norm_obs.then(|| venv.state().to_json()),
         num_timesteps: algo.num_timesteps(),
         train_seed: config.seed,
@@ -527,16 +531,10 @@ fn run<A: Algorithm>(
         let mut stop = false;
         if config.eval.freq > 0 && steps >= next_eval {
             next_eval += config.eval.freq;
-            let norm = config.normalize.norm_obs.then(|| venv.state().clone());
-            let mut policy = |obs: &[f32]| -> Result<Vec<f32>> {
-                let input = match &norm {
-                    Some(n) => n.normalize_obs(obs)?,
-                    None => obs.to_vec(),
-                };
-                algo.predict(&input, true)
-            };
+            // Acts exactly as the saved model will (`fairgrasp eval`, deployment).
+            let mut policy = Policy::from_parts(meta(&algo, &venv), &algo.weights()?)?;
             let result = evaluate(
-                &mut policy,
+                &mut |obs| policy.act(obs, true),
                 &config.env_id,
                 &config.env,
                 config.eval.episodes,

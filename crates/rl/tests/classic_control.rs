@@ -1,7 +1,7 @@
 //! The algorithms learn classic-control tasks within a bounded number of steps (small enough for
 //! CI; the long versions are benchmarks).
 
-use fairgrasp_env::classic::PointReach;
+use fairgrasp_env::tasks::classic::PointReach;
 use fairgrasp_env::{Env, VecEnv, VectorEnv};
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use rand::SeedableRng;

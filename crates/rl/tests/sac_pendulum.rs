@@ -1,7 +1,7 @@
 //! SAC learns Pendulum-v1 within a bounded number of steps (small enough for CI in debug mode;
 //! SB3 and CleanRL reach about −200 within 10–20k steps with larger networks).
 
-use fairgrasp_env::classic::Pendulum;
+use fairgrasp_env::tasks::classic::Pendulum;
 use fairgrasp_env::wrappers::RescaleAction;
 use fairgrasp_env::{Env, VecEnv, VectorEnv};
 use fairgrasp_rl::algorithm::Algorithm;

@@ -2,7 +2,8 @@
 //! resume from checkpoints; saved models load back or fail with a clear error.
 
 use fairgrasp_rl::logger::read_scalars;
-use fairgrasp_rl::model::{LoadedModel, load_tensors};
+use fairgrasp_rl::model::load_tensors;
+use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{TrainConfig, checkpoints, resume, train};
 use std::path::Path;
 
@@ -175,12 +176,18 @@ fn saved_models_load_and_corrupt_or_mismatched_ones_fail_clearly() {
     let run = dir.path();
     train(&tiny_config(512), run, |_| {}).unwrap();
     // A run directory means its best model; it acts on raw observations.
-    let mut model = LoadedModel::load(run).unwrap();
-    assert_eq!(model.meta.algo, "ppo");
-    let action = model.act(&vec![0.0; model.meta.obs_dim]).unwrap();
-    assert_eq!(action.len(), model.meta.act_dim);
-    let err = model.act(&[0.0; 3]).err().unwrap().to_string();
-    assert!(err.contains("3 values"), "{err}");
+    let mut model = Policy::load(run).unwrap();
+    assert_eq!(model.meta().algo, "ppo");
+    assert_eq!(model.env_id(), fairgrasp_rl::env::ENV_ID);
+    assert_eq!(model.dir(), Some(run.join("best").as_path()));
+    let action = model.act(&vec![0.0; model.obs_dim()], true).unwrap();
+    assert_eq!(action.len(), model.act_dim());
+    let err = model.act(&[0.0; 3], true).err().unwrap().to_string();
+    assert!(err.contains("3 values") && err.contains("best"), "{err}");
+    let mut nan = vec![0.0; model.obs_dim()];
+    nan[2] = f32::NAN;
+    let err = model.act(&nan, true).err().unwrap().to_string();
+    assert!(err.contains("value 2 is NaN"), "{err}");
 
     let copy = |name: &str| {
         let target = run.join(name);
@@ -192,24 +199,24 @@ fn saved_models_load_and_corrupt_or_mismatched_ones_fail_clearly() {
     };
     let corrupt = copy("corrupt");
     std::fs::write(corrupt.join("model.safetensors"), b"not a tensor file").unwrap();
-    let err = LoadedModel::load(&corrupt).err().unwrap().to_string();
+    let err = Policy::load(&corrupt).err().unwrap().to_string();
     assert!(err.contains("model.safetensors"), "{err}");
 
     let truncated = copy("truncated");
     std::fs::write(truncated.join("model.json"), b"{\"format_version\": 1").unwrap();
-    let err = LoadedModel::load(&truncated).err().unwrap().to_string();
+    let err = Policy::load(&truncated).err().unwrap().to_string();
     assert!(err.contains("not a fairgrasp model"), "{err}");
 
     let mismatched = copy("mismatched");
     let json = std::fs::read_to_string(mismatched.join("model.json")).unwrap();
-    let original = format!("\"obs_dim\": {}", model.meta.obs_dim);
+    let original = format!("\"obs_dim\": {}", model.obs_dim());
     assert!(json.contains(&original));
     let json = json.replacen(&original, "\"obs_dim\": 23", 1);
     std::fs::write(mismatched.join("model.json"), json).unwrap();
-    let err = LoadedModel::load(&mismatched).err().unwrap().to_string();
+    let err = Policy::load(&mismatched).err().unwrap().to_string();
     assert!(err.contains("shape"), "{err}");
 
-    let err = LoadedModel::load(&run.join("nowhere"))
+    let err = Policy::load(&run.join("nowhere"))
         .err()
         .unwrap()
         .to_string();

@@ -109,9 +109,19 @@ impl Default for RandomizationConfig {
 impl RandomizationConfig {
     pub fn validate(&self) -> Result<()> {
         check_range("randomization.object_mass", self.object_mass, 0.001, 5.0)?;
-        check_range("randomization.object_friction", self.object_friction, 0.0, 5.0)?;
+        check_range(
+            "randomization.object_friction",
+            self.object_friction,
+            0.0,
+            5.0,
+        )?;
         check_range("randomization.object_scale", self.object_scale, 0.2, 2.0)?;
-        check_range("randomization.joint_damping", self.joint_damping, 0.0, 100.0)?;
+        check_range(
+            "randomization.joint_damping",
+            self.joint_damping,
+            0.0,
+            100.0,
+        )?;
         check_range(
             "randomization.actuator_gain_scale",
             self.actuator_gain_scale,
@@ -199,7 +209,12 @@ impl ShapesConfig {
         }
         // The gripper opens 90 mm: keep every graspable width below 85 mm.
         check_range("shapes.box_side", self.box_side, 0.01, 0.085)?;
-        check_range("shapes.cylinder_radius", self.cylinder_radius, 0.005, 0.0425)?;
+        check_range(
+            "shapes.cylinder_radius",
+            self.cylinder_radius,
+            0.005,
+            0.0425,
+        )?;
         check_range("shapes.cylinder_height", self.cylinder_height, 0.01, 0.2)?;
         check_range("shapes.sphere_radius", self.sphere_radius, 0.005, 0.0425)?;
         check_range("shapes.mesh_scale", self.mesh_scale, 0.001, 1000.0)?;
@@ -216,7 +231,11 @@ impl ShapesConfig {
 /// Everything that defines an arm environment: the shared sections and the task's `T` (`[task]`)
 /// and `R` (`[reward]`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default, bound = "T: TaskSettings, R: RewardSettings")]
+#[serde(
+    deny_unknown_fields,
+    default,
+    bound = "T: TaskSettings, R: RewardSettings"
+)]
 pub struct ArmEnvConfig<T, R> {
     pub scene: SceneConfig,
     pub control: ControlConfig,

@@ -81,7 +81,9 @@ impl ControlConfig {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
                 return Err(EnvError::config(
                     "control.workspace_min",
-                    format!("must be below control.workspace_max on every axis (axis {k}: {lo} vs {hi})"),
+                    format!(
+                        "must be below control.workspace_max on every axis (axis {k}: {lo} vs {hi})"
+                    ),
                 ));
             }
         }

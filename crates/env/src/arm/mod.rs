@@ -224,7 +224,8 @@ impl<T: Task> ArmEnv<T> {
             if d.enabled {
                 mass = uniform(&mut self.rng, d.object_mass);
                 friction = uniform(&mut self.rng, d.object_friction);
-                shape = crate::tasks::shapes::scaled(&shape, uniform(&mut self.rng, d.object_scale));
+                shape =
+                    crate::tasks::shapes::scaled(&shape, uniform(&mut self.rng, d.object_scale));
             }
             if d.enabled || self.config.shapes.enabled {
                 report.set(format!("param/object{i}_mass"), mass);
@@ -343,7 +344,8 @@ impl<T: Task> Env for ArmEnv<T> {
             self.rng = ChaCha8Rng::seed_from_u64(seed);
         }
         let (latency, params) = self.randomize()?;
-        self.task.initialize_episode(&mut self.scene, &mut self.rng)?;
+        self.task
+            .initialize_episode(&mut self.scene, &mut self.rng)?;
         let state = ArmState::from_scene(&self.scene);
         let command = self.mapper.hold(&state, self.scene.arm_targets());
         let previous_action = vec![0.0; self.action_space.dim()];

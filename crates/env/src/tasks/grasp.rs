@@ -198,7 +198,12 @@ pub(crate) fn relative_yaw(state: &ArmState, i: usize) -> f64 {
 /// unlike Euler angles near a top-down pose), the object's position, its yaw relative to the
 /// TCP with the cube's fourfold symmetry folded out, the TCP→object vector, the lift, the
 /// gripper opening, the pad contacts and the previous action.
-pub(crate) fn rich_observation(s: &ArmState, i: usize, previous_action: &[f32], out: &mut ObsWriter) {
+pub(crate) fn rich_observation(
+    s: &ArmState,
+    i: usize,
+    previous_action: &[f32],
+    out: &mut ObsWriter,
+) {
     use NoiseGroup::*;
     let object = &s.objects[i];
     out.push(JointPosition, &s.q);
@@ -217,7 +222,10 @@ pub(crate) fn rich_observation(s: &ArmState, i: usize, previous_action: &[f32], 
     out.push3(ObjectPosition, &s.tcp_to_object(i));
     out.push1(ObjectPosition, s.lift(i) as f32);
     out.push1(Gripper, s.gripper_opening);
-    out.push(None, &object.pad_contacts.map(|c| if c { 1.0 } else { 0.0 }));
+    out.push(
+        None,
+        &object.pad_contacts.map(|c| if c { 1.0 } else { 0.0 }),
+    );
     out.push(None, previous_action);
 }
 
@@ -329,14 +337,21 @@ impl Task for Grasp {
                 let lift = (state.lift(0) as f32 / goal).clamp(0.0, 1.0);
                 terms.set("lift", if grasped { third * lift } else { 0.0 });
                 terms.set("time", -1.0);
-                terms.set("off_table", if off_table { -(steps_left as f32) } else { 0.0 });
+                terms.set(
+                    "off_table",
+                    if off_table { -(steps_left as f32) } else { 0.0 },
+                );
                 terms.set("success", if e.success { r.success } else { 0.0 });
             }
             RewardKind::Hybrid => {
                 terms.set("approach", r.approach * (self.previous_distance - distance));
                 terms.set(
                     "near",
-                    if distance < r.near_radius { r.near } else { 0.0 },
+                    if distance < r.near_radius {
+                        r.near
+                    } else {
+                        0.0
+                    },
                 );
                 // One-time bonuses: paid at most once per episode, so dropping and regrasping
                 // the object earns nothing more.

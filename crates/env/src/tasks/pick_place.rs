@@ -167,7 +167,8 @@ impl Task for PickPlace {
     fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
         scene.place_objects_at_random(rng)?;
         let area = &scene.config().placement;
-        let [x, y] = [0, 1].map(|k| (area.center[k] + (rng.random::<f32>() - 0.5) * area.size[k]) as f64);
+        let [x, y] =
+            [0, 1].map(|k| (area.center[k] + (rng.random::<f32>() - 0.5) * area.size[k]) as f64);
         let rest_z = scene.object_rest_height(0) - scene.base_pose().translation.z;
         let height = rng.random::<f64>() * self.settings.goal_max_height as f64;
         self.goal = Vector3::new(x, y, rest_z + height);

@@ -241,7 +241,10 @@ impl Task for Sort {
         use NoiseGroup::*;
         let active = self.active().unwrap_or(0);
         rich_observation(s, active, previous_action, out);
-        out.push3(ObjectPosition, &(self.drop_point(active) - s.objects[active].pose.translation.vector));
+        out.push3(
+            ObjectPosition,
+            &(self.drop_point(active) - s.objects[active].pose.translation.vector),
+        );
         for (i, object) in s.objects.iter().enumerate() {
             out.push3(ObjectPosition, &object.pose.translation.vector);
             let colour: Vec<f32> = (0..self.bins.len())
@@ -259,8 +262,7 @@ impl Task for Sort {
     fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation {
         for i in 0..self.sorted.len() {
             let resting = s.objects[i].linvel.norm() < self.settings.max_object_speed as f64;
-            self.sorted[i] =
-                scene.object_in_bin(i, self.assignment[i]) && resting && !s.grasped(i);
+            self.sorted[i] = scene.object_in_bin(i, self.assignment[i]) && resting && !s.grasped(i);
         }
         let count = self.sorted.iter().filter(|s| **s).count();
         let off = (0..self.sorted.len()).any(|i| scene.object_off_table(i));

@@ -1,0 +1,251 @@
+//! PPO's policy (SB3's `ActorCriticPolicy`): a feature extractor shared by a Gaussian policy
+//! head `pi` (state-independent log std) and a value head `vf`.
+
+use crate::distributions::{DiagGaussian, standard_normal_tensor};
+use crate::error::{Result, RlError};
+use crate::nn::Mlp;
+use crate::policies::features::FeaturesExtractor;
+use crate::ppo::PpoConfig;
+use candle_core::{DType, Device, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use rand::Rng;
+
+/// Output-layer gains (see [`Mlp::new`]): small for the policy means, so the first actions are
+/// near zero (as CleanRL does), ordinary for the value.
+const PI_OUTPUT_GAIN: f64 = 0.01;
+const VF_OUTPUT_GAIN: f64 = 1.0;
+
+/// A Gaussian policy with a state-independent standard deviation, and a value network, both
+/// reading the same features. Parameters: `pi.*`, `vf.*`, `log_std` (and `features.*` for an
+/// extractor with parameters).
+pub struct ActorCritic {
+    pub varmap: VarMap,
+    features: Box<dyn FeaturesExtractor>,
+    pi: Mlp,
+    vf: Mlp,
+    log_std: Var,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    device: Device,
+}
+
+/// What the policy decided for a batch of observations.
+#[derive(Clone, Debug, Default)]
+pub struct PolicyOutput {
+    /// Sampled (or, deterministically, mean) actions, unclipped.
+    pub actions: Vec<f32>,
+    pub log_probs: Vec<f32>,
+    pub values: Vec<f32>,
+}
+
+impl ActorCritic {
+    /// The networks, with weights drawn from `rng` (see [`Mlp::init_weights`]).
+    pub fn new(
+        obs_dim: usize,
+        act_dim: usize,
+        config: &PpoConfig,
+        rng: &mut impl Rng,
+    ) -> Result<Self> {
+        let policy = Self::zeroed(obs_dim, act_dim, config)?;
+        policy.features.init_weights(&policy.varmap, rng)?;
+        policy.pi.init_weights(&policy.varmap, rng)?;
+        policy.vf.init_weights(&policy.varmap, rng)?;
+        Ok(policy)
+    }
+
+    /// The networks with zero weights (`log_std` at its initial value), to load weights into.
+    pub fn zeroed(obs_dim: usize, act_dim: usize, config: &PpoConfig) -> Result<Self> {
+        let device = Device::Cpu;
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &device);
+        let features = config.features.build(&vb.pp("features"), obs_dim)?;
+        let (arch, activation) = (&config.net_arch, config.activation);
+        let dim = features.features_dim();
+        let pi = Mlp::new(&vb.pp("pi"), dim, arch, act_dim, activation, PI_OUTPUT_GAIN)?;
+        let vf = Mlp::new(&vb.pp("vf"), dim, arch, 1, activation, VF_OUTPUT_GAIN)?;
+        vb.get_with_hints(
+            act_dim,
+            "log_std",
+            candle_nn::Init::Const(config.log_std_init as f64),
+        )?;
+        let log_std = varmap
+            .data()
+            .lock()
+            .expect("varmap lock")
+            .get("log_std")
+            .cloned()
+            .ok_or_else(|| RlError::Other("log_std parameter missing".into()))?;
+        Ok(Self {
+            varmap,
+            features,
+            pi,
+            vf,
+            log_std,
+            obs_dim,
+            act_dim,
+            device,
+        })
+    }
+
+    /// `obs` (whole observations, row-major) as a `batch × obs_dim` tensor.
+    pub fn obs_tensor(&self, obs: &[f32]) -> Result<Tensor> {
+        obs_tensor(obs, self.obs_dim, &self.device)
+    }
+
+    /// The log standard deviation of every action dimension.
+    pub fn log_std(&self) -> &Tensor {
+        self.log_std.as_tensor()
+    }
+
+    /// The action distribution for a batch of observations.
+    pub fn distribution(&self, obs: &Tensor) -> Result<DiagGaussian> {
+        let features = self.features.forward(obs)?;
+        self.distribution_from_features(&features)
+    }
+
+    fn distribution_from_features(&self, features: &Tensor) -> Result<DiagGaussian> {
+        Ok(DiagGaussian::new(
+            self.pi.forward(features)?,
+            self.log_std.as_tensor().clone(),
+        )?)
+    }
+
+    /// The action distribution and the state values (`batch`), from one feature pass.
+    pub fn forward(&self, obs: &Tensor) -> Result<(DiagGaussian, Tensor)> {
+        let features = self.features.forward(obs)?;
+        let values = self.vf.forward(&features)?.squeeze(1)?;
+        Ok((self.distribution_from_features(&features)?, values))
+    }
+
+    /// State values for a batch of observations.
+    pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let features = self.features.forward(&self.obs_tensor(obs)?)?;
+        Ok(self.vf.forward(&features)?.flatten_all()?.to_vec1()?)
+    }
+
+    /// Samples actions (or takes the means when `deterministic`), with log-probabilities and
+    /// values. The noise comes from `rng`, `act_dim` draws per observation in order, so a
+    /// seeded run is reproducible.
+    pub fn act(
+        &self,
+        obs: &[f32],
+        deterministic: bool,
+        rng: &mut impl Rng,
+    ) -> Result<PolicyOutput> {
+        let (dist, values) = self.forward(&self.obs_tensor(obs)?)?;
+        let actions = self.actions(&dist, deterministic, rng)?;
+        Ok(PolicyOutput {
+            log_probs: dist.log_prob(&actions)?.to_vec1()?,
+            actions: actions.flatten_all()?.to_vec1()?,
+            values: values.to_vec1()?,
+        })
+    }
+
+    /// Actions only (no value pass): what [`Self::act`] would take, drawing the same noise.
+    /// The trainer's evaluation and [`crate::policies::Policy`] both act through this.
+    pub fn predict(
+        &self,
+        obs: &[f32],
+        deterministic: bool,
+        rng: &mut impl Rng,
+    ) -> Result<Vec<f32>> {
+        let dist = self.distribution(&self.obs_tensor(obs)?)?;
+        Ok(self
+            .actions(&dist, deterministic, rng)?
+            .flatten_all()?
+            .to_vec1()?)
+    }
+
+    fn actions(
+        &self,
+        dist: &DiagGaussian,
+        deterministic: bool,
+        rng: &mut impl Rng,
+    ) -> Result<Tensor> {
+        if deterministic {
+            return Ok(dist.mode());
+        }
+        let rows = dist.mean().dim(0)?;
+        Ok(dist.sample(&standard_normal_tensor(rng, rows, self.act_dim)?)?)
+    }
+}
+
+/// `obs` as a `batch × obs_dim` tensor; errors unless it holds whole observations.
+pub(crate) fn obs_tensor(obs: &[f32], obs_dim: usize, device: &Device) -> Result<Tensor> {
+    if obs.is_empty() || obs_dim == 0 || !obs.len().is_multiple_of(obs_dim) {
+        return Err(RlError::Other(format!(
+            "{} observation values are not rows of {obs_dim}",
+            obs.len()
+        )));
+    }
+    Ok(Tensor::from_slice(
+        obs,
+        (obs.len() / obs_dim, obs_dim),
+        device,
+    )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::algorithm::varmap_tensors;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    fn config() -> PpoConfig {
+        PpoConfig {
+            net_arch: vec![8, 8],
+            log_std_init: -0.5,
+            ..PpoConfig::default()
+        }
+    }
+
+    #[test]
+    fn parameter_names_are_those_of_saved_models() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let policy = ActorCritic::new(4, 2, &config(), &mut rng).unwrap();
+        let mut names: Vec<String> = varmap_tensors(&policy.varmap, "").into_keys().collect();
+        names.sort();
+        let mut want: Vec<String> = ["pi", "vf"]
+            .iter()
+            .flat_map(|head| (0..3).map(move |i| format!("{head}.l{i}")))
+            .flat_map(|layer| [format!("{layer}.bias"), format!("{layer}.weight")])
+            .collect();
+        want.push("log_std".into());
+        want.sort();
+        assert_eq!(names, want);
+        assert_eq!(policy.log_std().to_vec1::<f32>().unwrap(), [-0.5, -0.5]);
+    }
+
+    #[test]
+    fn act_samples_around_the_mean_and_predict_draws_the_same_noise() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let policy = ActorCritic::new(4, 2, &config(), &mut rng).unwrap();
+        let obs = [0.5f32, -1.0, 0.25, 2.0, 0.0, 0.1, -0.3, 1.0];
+        let mean = policy.predict(&obs, true, &mut rng).unwrap();
+        let det = policy.act(&obs, true, &mut rng).unwrap();
+        assert_eq!(det.actions, mean);
+        assert_eq!((det.values.len(), det.log_probs.len()), (2, 2));
+
+        let (mut a, mut b) = (ChaCha8Rng::seed_from_u64(9), ChaCha8Rng::seed_from_u64(9));
+        let sampled = policy.act(&obs, false, &mut a).unwrap();
+        assert_eq!(
+            policy.predict(&obs, false, &mut b).unwrap(),
+            sampled.actions
+        );
+        assert_ne!(sampled.actions, mean);
+        // The log-probability is that of N(mean, e^-1) at the sampled action.
+        for (row, lp) in sampled.log_probs.iter().enumerate() {
+            let want: f32 = (0..2)
+                .map(|k| {
+                    let i = row * 2 + k;
+                    let z = (sampled.actions[i] - mean[i]) / (-0.5f32).exp();
+                    -0.5 * z * z + 0.5 - 0.5 * (2.0 * std::f32::consts::PI).ln()
+                })
+                .sum();
+            assert!((lp - want).abs() < 1e-4, "{lp} vs {want}");
+        }
+        let err = policy.predict(&obs[..3], true, &mut a).unwrap_err();
+        assert!(err.to_string().contains("not rows of 4"), "{err}");
+    }
+}

@@ -1,0 +1,18 @@
+//! Policies (SB3's `common/policies.py`): the networks of each algorithm, built from its
+//! configuration through a [`features::FeaturesExtractor`], and [`Policy`], a saved model
+//! ready to act without its learner.
+//!
+//! - [`features`]: the feature-extractor seam ([`features::FeaturesConfig`], `flatten` today);
+//! - [`actor_critic`]: PPO's Gaussian policy and value network;
+//! - [`sac_policy`]: SAC's squashed Gaussian actor and twin critics;
+//! - [`policy`]: [`Policy`], for evaluation, deployment and the trainer's own evaluation.
+
+pub mod actor_critic;
+pub mod features;
+pub mod policy;
+pub mod sac_policy;
+
+pub use actor_critic::{ActorCritic, PolicyOutput};
+pub use features::{FeaturesConfig, FeaturesExtractor, FlattenExtractor};
+pub use policy::Policy;
+pub use sac_policy::{SacActor, SacCritics, SacPolicy};

@@ -1,0 +1,206 @@
+//! [`Policy`]: a saved model acting on raw observations, without its learner (no optimiser,
+//! no replay buffer, no critics).
+
+use crate::algorithm::{TensorMap, load_varmap};
+use crate::error::{Result, RlError};
+use crate::model::{ModelMeta, load_tensors, resolve_model_dir};
+use crate::policies::actor_critic::ActorCritic;
+use crate::policies::sac_policy::SacActor;
+use crate::sac::Networks as SacNetworks;
+use fairgrasp_env::wrappers::VecNormalizeState;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::path::{Path, PathBuf};
+
+/// The networks that choose actions.
+enum Actor {
+    Ppo(ActorCritic),
+    Sac(SacActor),
+}
+
+/// A trained policy: the model's networks and observation statistics. It gives exactly the
+/// actions of the learner it was saved from (the algorithms predict through the same
+/// functions), and the trainer's evaluation acts through it.
+pub struct Policy {
+    meta: ModelMeta,
+    /// The model directory it was read from (none when built from parts).
+    dir: Option<PathBuf>,
+    actor: Actor,
+    normalization: Option<VecNormalizeState>,
+    /// The stream of stochastic actions' noise.
+    rng: ChaCha8Rng,
+}
+
+impl Policy {
+    /// Loads a model directory, or a run directory's best model (see
+    /// [`crate::model::resolve_model_dir`]). A corrupt file, a missing, extra or mis-shaped
+    /// tensor, an unknown algorithm or bad statistics is an error that names the file or
+    /// directory and the problem. Stochastic actions draw from a stream seeded 0.
+    pub fn load(path: &Path) -> Result<Self> {
+        let dir = resolve_model_dir(path)?;
+        let meta = ModelMeta::load(&dir)?;
+        let weights = load_tensors(&dir.join("model.safetensors"))?;
+        let mut policy = Self::from_parts(meta, &weights)
+            .map_err(|e| RlError::Model(format!("{}: {e}", dir.display())))?;
+        policy.dir = Some(dir);
+        Ok(policy)
+    }
+
+    /// A policy from a model's description and weights (what [`Self::load`] reads from
+    /// `model.json` and `model.safetensors`; what the trainer has in memory).
+    pub fn from_parts(meta: ModelMeta, weights: &TensorMap) -> Result<Self> {
+        if meta.obs_dim == 0 || meta.act_dim == 0 {
+            return Err(RlError::Model(format!(
+                "model.json: a policy needs observations and actions, it names {} and {} values",
+                meta.obs_dim, meta.act_dim
+            )));
+        }
+        let missing = |algo: &str| {
+            RlError::Model(format!(
+                "model.json names algorithm {algo} but has no `{algo}` settings"
+            ))
+        };
+        let weights_error = |e: RlError| RlError::Model(format!("model.safetensors: {e}"));
+        let actor = match meta.algo.as_str() {
+            "ppo" => {
+                let config = meta.ppo.as_ref().ok_or_else(|| missing("ppo"))?;
+                let policy = ActorCritic::zeroed(meta.obs_dim, meta.act_dim, config)?;
+                load_varmap(&policy.varmap, weights).map_err(weights_error)?;
+                Actor::Ppo(policy)
+            }
+            "sac" => {
+                let config = meta.sac.as_ref().ok_or_else(|| missing("sac"))?;
+                let nets = SacNetworks::zeroed(meta.obs_dim, meta.act_dim, config)?;
+                nets.load_weights(weights, meta.obs_dim, meta.act_dim, config)
+                    .map_err(weights_error)?;
+                Actor::Sac(nets.into_actor())
+            }
+            other => {
+                return Err(RlError::Model(format!(
+                    "model.json: unknown algorithm `{other}` (expected ppo or sac)"
+                )));
+            }
+        };
+        let normalization = match &meta.normalization {
+            Some(json) => Some(VecNormalizeState::from_json(json).map_err(|p| {
+                RlError::Model(format!("model.json: normalisation statistics: {p}"))
+            })?),
+            None => None,
+        };
+        if let Some(n) = &normalization
+            && n.obs_dim() != meta.obs_dim
+        {
+            return Err(RlError::Model(format!(
+                "model.json: normalisation statistics for {} values, the model takes {}",
+                n.obs_dim(),
+                meta.obs_dim
+            )));
+        }
+        Ok(Self {
+            meta,
+            dir: None,
+            actor,
+            normalization,
+            rng: ChaCha8Rng::seed_from_u64(0),
+        })
+    }
+
+    /// The action for one raw observation (normalised here when the model was trained on
+    /// normalised observations): the distribution's mode when `deterministic`, else a sample.
+    /// Unclipped: the caller clips to its action space.
+    pub fn act(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        if obs.len() != self.meta.obs_dim {
+            return Err(self.error(format!(
+                "observation has {} values, the model takes {}",
+                obs.len(),
+                self.meta.obs_dim
+            )));
+        }
+        self.act_rows(obs, deterministic)
+    }
+
+    /// Actions for several raw observations stored row-major (`n × obs_dim` values give
+    /// `n × act_dim`). A row's action can differ from [`Self::act`]'s for it in the last bits
+    /// (batched matrix products round differently).
+    pub fn act_batch(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        if obs.is_empty() || !obs.len().is_multiple_of(self.meta.obs_dim) {
+            return Err(self.error(format!(
+                "{} observation values are not whole observations of {} values",
+                obs.len(),
+                self.meta.obs_dim
+            )));
+        }
+        self.act_rows(obs, deterministic)
+    }
+
+    fn act_rows(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        if let Some(i) = obs.iter().position(|v| !v.is_finite()) {
+            let dim = self.meta.obs_dim;
+            let row = if obs.len() > dim {
+                format!("observation {}, ", i / dim)
+            } else {
+                String::new()
+            };
+            return Err(self.error(format!(
+                "{row}value {} is {} (observations must be finite)",
+                i % dim,
+                obs[i]
+            )));
+        }
+        let normalized;
+        let input = match &self.normalization {
+            Some(n) => {
+                normalized = n.normalize_obs(obs)?;
+                &normalized
+            }
+            None => obs,
+        };
+        match &self.actor {
+            Actor::Ppo(policy) => policy.predict(input, deterministic, &mut self.rng),
+            Actor::Sac(actor) => actor.predict(input, deterministic, &mut self.rng),
+        }
+    }
+
+    /// Restarts the stream of stochastic actions from `seed`.
+    pub fn set_seed(&mut self, seed: u64) {
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+    }
+
+    /// The model's description (`model.json`).
+    pub fn meta(&self) -> &ModelMeta {
+        &self.meta
+    }
+
+    /// The model directory it was loaded from.
+    pub fn dir(&self) -> Option<&Path> {
+        self.dir.as_deref()
+    }
+
+    /// Values per observation.
+    pub fn obs_dim(&self) -> usize {
+        self.meta.obs_dim
+    }
+
+    /// Values per action.
+    pub fn act_dim(&self) -> usize {
+        self.meta.act_dim
+    }
+
+    /// Id of the environment the model was trained on.
+    pub fn env_id(&self) -> &str {
+        &self.meta.env_id
+    }
+
+    /// The configuration of that environment, for the environment registry to parse.
+    pub fn env_config(&self) -> &serde_json::Value {
+        &self.meta.env
+    }
+
+    /// An error about acting, naming the model's directory when it has one.
+    fn error(&self, problem: String) -> RlError {
+        match &self.dir {
+            Some(dir) => RlError::Model(format!("{}: {problem}", dir.display())),
+            None => RlError::Model(problem),
+        }
+    }
+}
