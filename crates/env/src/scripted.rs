@@ -1,11 +1,11 @@
-//! A scripted grasp policy that acts only through [`Env::step`](crate::Env::step): the proof
-//! that the task can be solved with the environment's own actions, in joint and Cartesian mode.
+//! A scripted pick that acts only through [`Env::step`](crate::Env::step): the proof that a
+//! task can be solved with the environment's own actions, in joint and Cartesian mode.
 //!
 //! It is privileged (it reads the object pose from the simulator) and plans like the scene's
-//! scripted pick: above the cube, fingers aligned, descend, close, lift, hold.
+//! scripted pick: above the object, fingers aligned, descend, close, lift, hold — or, given a
+//! goal, carry the object there and hold it.
 
-use crate::arm::ActionMode;
-use crate::tasks::grasp::GraspEnv;
+use crate::arm::{ActionMode, ArmEnv, Task};
 use fairgrasp_sim::rapier3d::na::{Isometry3, Translation3, Vector3};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -14,7 +14,11 @@ enum Phase {
     Descend,
     Close,
     Lift,
+    Carry,
     Hold,
+    /// Open over the goal and wait for the object to drop (sorting).
+    Release,
+    Done,
 }
 
 /// A scripted top-down grasp, one action per control step.
@@ -25,6 +29,10 @@ pub struct ScriptedGraspPolicy {
     pre: Isometry3<f64>,
     grasp: Isometry3<f64>,
     lifted: Isometry3<f64>,
+    /// Pick and place: the TCP pose that puts the object's centre on the goal.
+    placed: Option<Isometry3<f64>>,
+    /// Open the gripper once over the goal.
+    release: bool,
     /// The pose being tracked (moves towards the phase's goal by at most `speed` per step).
     commanded: Isometry3<f64>,
 }
@@ -34,12 +42,30 @@ const SPEED: f64 = 0.02;
 const APPROACH_HEIGHT: f64 = 0.10;
 const LIFT_HEIGHT: f64 = 0.12;
 const CLOSE_STEPS: u32 = 10;
+const RELEASE_STEPS: u32 = 15;
 
 impl ScriptedGraspPolicy {
-    /// Plans for the episode that `env` has just been reset to.
-    pub fn new(env: &GraspEnv) -> Self {
+    /// Plans a pick of object 0 for the episode that `env` has just been reset to.
+    pub fn new<T: Task>(env: &ArmEnv<T>) -> Self {
+        Self::with_goal(env, None)
+    }
+
+    /// Plans a pick of object 0 and, with a `goal` (world frame), a carry that brings the
+    /// object's centre there.
+    pub fn with_goal<T: Task>(env: &ArmEnv<T>, goal: Option<Vector3<f64>>) -> Self {
+        Self::for_object(env, 0, goal, false)
+    }
+
+    /// Plans a pick of object `i`, a carry of its centre to `goal` (world frame) if given, and
+    /// with `release`, opening the gripper there (dropping it into a bin).
+    pub fn for_object<T: Task>(
+        env: &ArmEnv<T>,
+        i: usize,
+        goal: Option<Vector3<f64>>,
+        release: bool,
+    ) -> Self {
         let scene = env.scene();
-        let object = scene.object_state(0).pose;
+        let object = scene.object_state(i).pose;
         let yaw = scene.grasp_yaw(&object.rotation);
         let centre = object.translation.vector;
         let pose = |offset: f64| scene.top_down_pose(centre + Vector3::new(0.0, 0.0, offset), yaw);
@@ -49,6 +75,11 @@ impl ScriptedGraspPolicy {
             pre: pose(APPROACH_HEIGHT),
             grasp: pose(0.0),
             lifted: pose(LIFT_HEIGHT),
+            placed: goal.map(|g| {
+                // The TCP holds the object where it grasped it: at its centre.
+                scene.top_down_pose(g, yaw)
+            }),
+            release,
             commanded: scene.tcp_pose(),
         }
     }
@@ -57,13 +88,16 @@ impl ScriptedGraspPolicy {
         match self.phase {
             Phase::Approach => self.pre,
             Phase::Descend | Phase::Close => self.grasp,
-            Phase::Lift | Phase::Hold => self.lifted,
+            Phase::Lift => self.lifted,
+            Phase::Carry | Phase::Hold | Phase::Release | Phase::Done => {
+                self.placed.unwrap_or(self.lifted)
+            }
         }
     }
 
     fn gripper(&self) -> f32 {
         match self.phase {
-            Phase::Approach | Phase::Descend => 1.0,
+            Phase::Approach | Phase::Descend | Phase::Release | Phase::Done => 1.0,
             _ => -1.0,
         }
     }
@@ -84,7 +118,7 @@ impl ScriptedGraspPolicy {
         );
     }
 
-    fn update_phase(&mut self, env: &GraspEnv) {
+    fn update_phase<T: Task>(&mut self, env: &ArmEnv<T>) {
         self.steps_in_phase += 1;
         let tcp = env.scene().tcp_pose();
         let goal = self.goal();
@@ -94,7 +128,10 @@ impl ScriptedGraspPolicy {
             Phase::Approach if reached => Some(Phase::Descend),
             Phase::Descend if reached => Some(Phase::Close),
             Phase::Close if self.steps_in_phase >= CLOSE_STEPS => Some(Phase::Lift),
-            Phase::Lift if reached => Some(Phase::Hold),
+            Phase::Lift if reached && self.placed.is_some() => Some(Phase::Carry),
+            Phase::Lift | Phase::Carry if reached => Some(Phase::Hold),
+            Phase::Hold if self.release => Some(Phase::Release),
+            Phase::Release if self.steps_in_phase >= RELEASE_STEPS => Some(Phase::Done),
             _ => None,
         };
         if let Some(next) = next {
@@ -103,8 +140,13 @@ impl ScriptedGraspPolicy {
         }
     }
 
+    /// Whether a releasing plan has dropped its object.
+    pub fn done(&self) -> bool {
+        self.phase == Phase::Done
+    }
+
     /// The next action for `env` (in its action space, before any rescaling wrapper).
-    pub fn act(&mut self, env: &GraspEnv) -> Vec<f32> {
+    pub fn act<T: Task>(&mut self, env: &ArmEnv<T>) -> Vec<f32> {
         self.update_phase(env);
         self.advance_commanded();
         let gripper = self.gripper();

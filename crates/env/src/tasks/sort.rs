@@ -22,6 +22,15 @@ use serde::{Deserialize, Serialize};
 
 pub const ENV_ID: &str = "FaArmSort-v0";
 
+/// Slot offsets inside a bin, in units of `slot_spacing`.
+const SLOTS: [[f64; 2]; 5] = [
+    [-1.0, -1.0],
+    [1.0, 1.0],
+    [-1.0, 1.0],
+    [1.0, -1.0],
+    [0.0, 0.0],
+];
+
 /// Bin colours, in bin order: red, blue, green (linear RGB).
 const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
 
@@ -62,6 +71,8 @@ pub struct SortSettings {
     pub object_area_size: [f32; 2],
     /// Bin centres (arm base frame x, y, m), the first `num_bins` used.
     pub bin_centers: Vec<[f32; 2]>,
+    /// Inner size of every bin (m).
+    pub bin_inner_size: [f32; 2],
     /// An object counts as resting when slower than this (m/s).
     pub max_object_speed: f32,
     pub render_mode: Option<RenderMode>,
@@ -76,6 +87,8 @@ impl Default for SortSettings {
             object_area_center: [0.45, 0.0],
             object_area_size: [0.2, 0.2],
             bin_centers: vec![[0.45, -0.27], [0.45, 0.27], [0.7, 0.0]],
+            // Room for every object side by side: 3 objects of up to 6 cm.
+            bin_inner_size: [0.2, 0.2],
             max_object_speed: 0.05,
             render_mode: None,
         }
@@ -112,6 +125,12 @@ impl TaskSettings for SortSettings {
             return Err(EnvError::config(
                 "task.max_episode_steps",
                 "must be at least 1",
+            ));
+        }
+        if !self.bin_inner_size.iter().all(|v| (0.1..=0.4).contains(v)) {
+            return Err(EnvError::config(
+                "task.bin_inner_size",
+                "each side must be in [0.1, 0.4] m",
             ));
         }
         check_non_negative("task.max_object_speed", self.max_object_speed)
@@ -157,6 +176,8 @@ pub struct Sort {
     bins: Vec<Vector3<f64>>,
     /// Height above a bin's floor from which objects are dropped in (m).
     drop_height: f64,
+    /// Distance of a slot's centre from the bin's centre along x and y (m).
+    slot_spacing: f64,
     /// Objects already paid for.
     paid: Vec<bool>,
     /// Objects resting in their bin at the last evaluation.
@@ -169,9 +190,13 @@ impl Sort {
         self.sorted.iter().position(|s| !s)
     }
 
-    /// Where the active object should go: above the centre of its bin.
-    fn drop_point(&self, i: usize) -> Vector3<f64> {
-        self.bins[self.assignment[i]] + Vector3::new(0.0, 0.0, self.drop_height)
+    /// Where object `i` should be dropped from (arm base frame): above its own slot of its
+    /// bin, so objects sharing a bin lie side by side instead of stacking above the walls.
+    pub fn drop_point(&self, i: usize) -> Vector3<f64> {
+        let bin = self.assignment[i];
+        let slot = self.assignment[..i].iter().filter(|b| **b == bin).count();
+        let [dx, dy] = SLOTS[slot % SLOTS.len()].map(|v| v * self.slot_spacing);
+        self.bins[bin] + Vector3::new(dx, dy, self.drop_height)
     }
 
     /// Each object's bin this episode.
@@ -202,6 +227,7 @@ impl Task for Sort {
             .map(|j| BinConfig {
                 name: format!("bin{j}"),
                 center: t.bin_centers[j],
+                inner_size: t.bin_inner_size,
                 color: BIN_COLORS[j],
                 ..BinConfig::default()
             })
@@ -222,6 +248,8 @@ impl Task for Sort {
             assignment: vec![0; n],
             bins,
             drop_height: wall + 0.06,
+            slot_spacing: (config.task.bin_inner_size[0].min(config.task.bin_inner_size[1]) / 4.0)
+                as f64,
             paid: vec![false; n],
             sorted: vec![false; n],
         })

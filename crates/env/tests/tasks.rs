@@ -1,0 +1,126 @@
+//! The new tasks can be solved with their own actions, and their success rules and rewards
+//! behave: a scripted pick-and-place through `step()` succeeds; sorting counts objects in bins.
+
+use fairgrasp_env::Env;
+use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::sim::rapier3d::na::Point3;
+use fairgrasp_env::tasks::pick_place::{PickPlaceConfig, PickPlaceEnv};
+use fairgrasp_env::tasks::sort::{SortConfig, SortEnv};
+
+fn pick_place(mode: ActionMode) -> PickPlaceEnv {
+    let mut config = PickPlaceConfig::default();
+    config.control.action_mode = mode;
+    config.task.max_episode_steps = 150;
+    PickPlaceEnv::new(config).unwrap()
+}
+
+#[test]
+fn a_scripted_pick_and_place_through_step_reaches_the_goal() {
+    for mode in [ActionMode::Cartesian, ActionMode::Joint] {
+        let mut env = pick_place(mode);
+        let mut successes = 0;
+        let episodes = 10;
+        for seed in 0..episodes {
+            env.reset(Some(seed)).unwrap();
+            let base = env.scene().base_pose();
+            let goal = base * Point3::from(env.task().goal());
+            let mut policy = ScriptedGraspPolicy::with_goal(&env, Some(goal.coords));
+            let mut rewards = Vec::new();
+            loop {
+                let step = env.step(&policy.act(&env)).unwrap();
+                rewards.push(step.reward);
+                if step.terminated || step.truncated {
+                    if step.info.success {
+                        successes += 1;
+                        assert!(step.info.extras.value("object_goal_distance") < 0.025);
+                        // ≤ 0 per step until the success bonus.
+                        let before = &rewards[..rewards.len() - 1];
+                        assert!(before.iter().all(|r| *r <= 0.0), "{before:?}");
+                    }
+                    break;
+                }
+            }
+        }
+        assert!(successes >= 9, "{mode:?}: {successes}/{episodes}");
+    }
+}
+
+#[test]
+fn the_goal_is_observed_and_lies_in_the_area_up_to_its_height() {
+    let mut env = pick_place(ActionMode::Cartesian);
+    let mut heights = Vec::new();
+    for seed in 0..30 {
+        let (obs, _) = env.reset(Some(seed)).unwrap();
+        let goal = env.task().goal();
+        let n = obs.len();
+        // The goal, then the object → goal vector, close the observation.
+        assert_eq!(
+            &obs[n - 6..n - 3],
+            &[goal.x as f32, goal.y as f32, goal.z as f32]
+        );
+        let state = env.state().unwrap();
+        let rest = state.objects[0].rest_z;
+        assert!(goal.z >= rest - 1e-6 && goal.z <= rest + 0.2 + 1e-6);
+        assert!((0.3..=0.7).contains(&goal.x) && (-0.2..=0.2).contains(&goal.y));
+        heights.push(goal.z - rest);
+    }
+    assert!(heights.iter().any(|h| *h > 0.1) && heights.iter().any(|h| *h < 0.05));
+}
+
+#[test]
+fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
+    let mut config = SortConfig::default();
+    config.control.action_mode = ActionMode::Cartesian;
+    config.task.max_episode_steps = 600;
+    let mut env = SortEnv::new(config).unwrap();
+    let mut successes = 0;
+    for seed in 0..5 {
+        env.reset(Some(seed)).unwrap();
+        let n = env.scene().num_objects();
+        let mut sorted_seen = 0.0;
+        let mut bonuses = 0.0;
+        'episode: for i in 0..n {
+            let base = env.scene().base_pose();
+            let drop = base * Point3::from(env.task().drop_point(i));
+            let mut policy = ScriptedGraspPolicy::for_object(&env, i, Some(drop.coords), true);
+            while !policy.done() {
+                let step = env.step(&policy.act(&env)).unwrap();
+                let sorted = step.info.extras.value("objects_sorted");
+                // The count never runs ahead of the objects dropped so far.
+                assert!(sorted <= (i + 1) as f32, "{sorted} after object {i}");
+                sorted_seen = f32::max(sorted_seen, sorted);
+                bonuses += step.info.reward_terms.value("object_sorted");
+                if step.terminated || step.truncated {
+                    successes += step.info.success as u32;
+                    break 'episode;
+                }
+            }
+        }
+        // One bonus per object, paid once.
+        assert_eq!(bonuses, 5.0 * sorted_seen, "seed {seed}");
+    }
+    assert!(successes >= 4, "{successes}/5");
+}
+
+#[test]
+fn an_object_dropped_into_the_wrong_bin_is_not_sorted() {
+    let mut config = SortConfig::default();
+    config.control.action_mode = ActionMode::Cartesian;
+    config.task.num_objects = 1;
+    let mut env = SortEnv::new(config).unwrap();
+    env.reset(Some(2)).unwrap();
+    let wrong = 1 - env.task().assignment()[0];
+    let mut drop = env.scene().bin_pose(wrong).translation.vector;
+    drop.z += 0.11;
+    let mut policy = ScriptedGraspPolicy::for_object(&env, 0, Some(drop), true);
+    while !policy.done() {
+        let step = env.step(&policy.act(&env)).unwrap();
+        assert_eq!(step.info.extras.value("objects_sorted"), 0.0);
+        assert!(!step.terminated);
+    }
+    assert!(
+        env.scene().object_in_bin(0, wrong),
+        "the drop missed the bin"
+    );
+}
