@@ -510,14 +510,10 @@ fn parked_objects_are_out_of_play() {
     scene.park_objects();
     let parked = [scene.object_state(0).pose, scene.object_state(1).pose];
     run_for(&mut scene, 0.5);
-    for i in 0..2 {
+    for (i, pose) in parked.iter().enumerate() {
         assert!(scene.object_parked(i));
         assert!(scene.object_off_table(i));
-        assert_eq!(
-            scene.object_state(i).pose,
-            parked[i],
-            "a parked object moved"
-        );
+        assert_eq!(&scene.object_state(i).pose, pose, "a parked object moved");
     }
     assert_eq!(scene.in_contact("cube", "table"), Some(false));
     assert_eq!(scene.in_contact("ball", "table"), Some(false));
