@@ -13,6 +13,7 @@ use rapier3d::parry::query;
 use rapier3d::prelude::*;
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Gap kept between objects, and between objects and bins, when placing (m).
 const PLACEMENT_CLEARANCE: f32 = 0.002;
@@ -347,7 +348,7 @@ impl Scene {
         }
         collider.set_mass(mass);
         collider.set_friction(friction);
-        let in_force = &mut self.layout.objects[i];
+        let in_force = &mut Arc::make_mut(&mut self.layout).objects[i];
         if changed_shape {
             in_force.shape = shape.clone();
         }
@@ -514,7 +515,7 @@ impl Scene {
             let at = collider_pose(&self.world, c);
             self.world.colliders[c].set_position(at);
         }
-        self.layout.bins[j].center = xy;
+        Arc::make_mut(&mut self.layout).bins[j].center = xy;
         Ok(())
     }
 
