@@ -92,6 +92,10 @@ class SceneSettings:
     @classmethod
     def from_config(cls, config: dict) -> "SceneSettings":
         s = config["scene"]
+        # The reference simulates the task's one cube: the first configured object, a box.
+        cube = s["objects"][0]
+        if cube["shape"]["kind"] != "box":
+            raise ValueError("the reference scene needs scene.objects[0] to be a box")
         return cls(
             dt=s["physics"]["dt"],
             substeps=s["physics"]["substeps"],
@@ -100,9 +104,9 @@ class SceneSettings:
             table_size=tuple(s["table"]["size"]),
             table_center=tuple(s["table"]["center"]),
             table_friction=s["table"]["friction"],
-            object_size=s["object"]["size"],
-            object_mass=s["object"]["mass"],
-            object_friction=s["object"]["friction"],
+            object_size=cube["shape"]["size"][0],
+            object_mass=cube["mass"],
+            object_friction=cube["friction"],
             placement_center=tuple(s["placement"]["center"]),
             placement_size=tuple(s["placement"]["size"]),
             yaw_range=s["placement"]["yaw_range"],

@@ -114,7 +114,10 @@ fn config_errors_name_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let cases = [
         ("[physics]\nsubsteps = 0\n", "physics.substeps"),
-        ("[object]\nmass = -0.1\n", "object.mass"),
+        (
+            "[[objects]]\nname = \"cube\"\nshape = { kind = \"sphere\", radius = 0.02 }\nmass = -0.1\n",
+            "objects[0].mass",
+        ),
         ("[gripper]\nforce_limt = 10.0\n", "force_limt"),
         ("[tabel]\nheight = 0.7\n", "tabel"),
         ("[physics]\ndt = \"fast\"\n", "dt"),

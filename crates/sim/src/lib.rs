@@ -4,7 +4,7 @@
 //! - [`model`]: URDF loading and validation (meshes, `package://` paths, clear errors);
 //! - [`robot`]: the model as a multibody with PD/torque control and state queries;
 //! - [`kinematics`]: forward and inverse kinematics of a chain;
-//! - [`scene`]: the grasp scene (arm, gripper, table, cube), stepping, reset and queries;
+//! - [`scene`]: the grasp scene (arm, gripper, table, objects, bins), stepping, reset and queries;
 //! - [`pick`]: a scripted pick-and-lift controller and the task's success rule;
 //! - [`assets`]: the bundled FR5 and gripper descriptions.
 

@@ -136,8 +136,8 @@ impl Default for ObjectConfig {
     }
 }
 
-/// An open box fixed on the table: a floor and four walls, all `wall_thickness` thick. Its sides
-/// are parallel to the arm base frame axes.
+/// An open box fixed on the table: a floor and four walls, all `wall_thickness` thick, with the
+/// table's friction. Its sides are parallel to the arm base frame axes.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BinConfig {
@@ -168,7 +168,7 @@ impl Default for BinConfig {
     }
 }
 
-/// Where objects are placed at reset: uniform in a rectangle on the table, uniform yaw.
+/// Where [`super::Scene::reset`] places objects: uniform in a rectangle on the table, uniform yaw.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlacementConfig {

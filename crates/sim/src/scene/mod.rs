@@ -35,6 +35,7 @@ use rand_chacha::ChaCha8Rng;
 use rapier3d::na::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
 use std::collections::HashMap;
+use std::sync::Arc;
 
 /// The parts of the rapier world that change while stepping; cloned for snapshots.
 #[derive(Clone)]
@@ -54,12 +55,13 @@ struct WorldState {
 pub struct Snapshot {
     world: WorldState,
     robot: Robot,
-    layout: Layout,
+    layout: Arc<Layout>,
     time: f64,
 }
 
 /// What tasks change per episode outside the physics world: the object settings in force
-/// (shape, mass, friction) and the bin centres.
+/// (shape, mass, friction) and the bin centres. Shared between the scene and its snapshots
+/// (copied on write), so restores stay a pointer copy.
 #[derive(Clone)]
 struct Layout {
     objects: Vec<ObjectConfig>,
@@ -114,7 +116,7 @@ pub struct Scene {
     /// In config order.
     objects: Vec<ObjectHandles>,
     bin_bodies: Vec<RigidBodyHandle>,
-    layout: Layout,
+    layout: Arc<Layout>,
     meshes: MeshCache,
     table_top: f32,
     home: Snapshot,
@@ -271,10 +273,10 @@ impl Scene {
             home: Snapshot {
                 world: world.clone(),
                 robot: robot.clone(),
-                layout: Layout {
+                layout: Arc::new(Layout {
                     objects: Vec::new(),
                     bins: Vec::new(),
-                },
+                }),
                 time: 0.0,
             },
             world,
@@ -287,10 +289,10 @@ impl Scene {
             table_collider,
             objects: Vec::new(),
             bin_bodies: Vec::new(),
-            layout: Layout {
+            layout: Arc::new(Layout {
                 objects: config.objects.clone(),
                 bins: config.bins.clone(),
-            },
+            }),
             meshes: MeshCache::new(),
             table_top,
             home_tcp: Isometry3::identity(),
@@ -399,7 +401,7 @@ impl Scene {
     pub fn restore(&mut self, snapshot: &Snapshot) {
         self.world.clone_from(&snapshot.world);
         self.robot.clone_from(&snapshot.robot);
-        self.layout.clone_from(&snapshot.layout);
+        self.layout = Arc::clone(&snapshot.layout);
         self.time = snapshot.time;
     }
 
@@ -680,6 +682,7 @@ impl Scene {
 
     /// The TCP yaw that grasps a cube of orientation `object` across two opposite faces, chosen
     /// among the four symmetric ones as the nearest to the home TCP yaw (least wrist travel).
+    /// For an object of the scene, whatever its shape, see [`Self::object_grasp_yaw`].
     pub fn grasp_yaw(&self, object: &UnitQuaternion<f64>) -> f64 {
         use std::f64::consts::{FRAC_PI_2, PI};
         let reference = yaw_of(&self.home_tcp.rotation);
@@ -731,7 +734,7 @@ impl Scene {
         // Field by field: cloning the whole home snapshot first would copy the world twice.
         self.world.clone_from(&self.home.world);
         self.robot.clone_from(&self.home.robot);
-        self.layout.clone_from(&self.home.layout);
+        self.layout = Arc::clone(&self.home.layout);
         self.time = self.home.time;
         self.apply_params(params)?;
         if !home_offset.is_empty() {

@@ -13,9 +13,13 @@ use rapier3d::parry::query;
 use rapier3d::prelude::*;
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Gap kept between objects, and between objects and bins, when placing (m).
 const PLACEMENT_CLEARANCE: f32 = 0.002;
+
+/// Largest gap at which two shapes count as touching (m).
+const TOUCH_DISTANCE: f32 = 0.001;
 
 /// Height above its resting height at which an object is placed, so it starts clear of the table.
 const DROP_GAP: f64 = 0.001;
@@ -344,7 +348,7 @@ impl Scene {
         }
         collider.set_mass(mass);
         collider.set_friction(friction);
-        let in_force = &mut self.layout.objects[i];
+        let in_force = &mut Arc::make_mut(&mut self.layout).objects[i];
         if changed_shape {
             in_force.shape = shape.clone();
         }
@@ -419,16 +423,30 @@ impl Scene {
         best
     }
 
+    /// Whether two colliders touch: a contact point of the last step is at most
+    /// [`TOUCH_DISTANCE`] apart. (rapier also keeps speculative contacts up to 2 cm apart.)
+    fn touching(&self, a: ColliderHandle, b: ColliderHandle) -> bool {
+        self.world
+            .narrow_phase
+            .contact_pair(a, b)
+            .is_some_and(|pair| {
+                pair.solver_manifolds().iter().any(|m| {
+                    m.data
+                        .solver_contacts
+                        .iter()
+                        .any(|c| c.dist <= TOUCH_DISTANCE)
+                })
+            })
+    }
+
     /// Whether each finger pad (left, right) touches object `i`.
     pub fn finger_contacts(&self, i: usize) -> [bool; 2] {
         let object = self.handles(i).collider;
         self.finger_bodies.map(|b| {
-            self.world.bodies[b].colliders().iter().any(|&c| {
-                self.world
-                    .narrow_phase
-                    .contact_pair(c, object)
-                    .is_some_and(|p| p.has_any_active_contact())
-            })
+            self.world.bodies[b]
+                .colliders()
+                .iter()
+                .any(|&c| self.touching(c, object))
         })
     }
 
@@ -437,14 +455,10 @@ impl Scene {
     pub fn in_contact(&self, a: &str, b: &str) -> Option<bool> {
         let a = self.colliders_of(a)?;
         let b = self.colliders_of(b)?;
-        Some(a.iter().any(|&ca| {
-            b.iter().any(|&cb| {
-                self.world
-                    .narrow_phase
-                    .contact_pair(ca, cb)
-                    .is_some_and(|p| p.has_any_active_contact())
-            })
-        }))
+        Some(
+            a.iter()
+                .any(|&ca| b.iter().any(|&cb| self.touching(ca, cb))),
+        )
     }
 
     fn colliders_of(&self, name: &str) -> Option<Vec<ColliderHandle>> {
@@ -510,7 +524,7 @@ impl Scene {
             let at = collider_pose(&self.world, c);
             self.world.colliders[c].set_position(at);
         }
-        self.layout.bins[j].center = xy;
+        Arc::make_mut(&mut self.layout).bins[j].center = xy;
         Ok(())
     }
 
