@@ -7,6 +7,7 @@
 mod mesh;
 mod packages;
 mod parse;
+mod xacro;
 
 pub use mesh::{MeshCollision, TriangleMesh};
 pub use packages::PackagePaths;
