@@ -121,8 +121,8 @@ fn a_heavy_or_slippery_object_slips_out_during_the_lift() {
         0,
         &PickScript::default(),
         SuccessRule::default(),
-        // 200 N of weight; the 40 N squeeze on two pads gives at most about 90 N of friction.
-        |scene| scene.set_object_properties(20.0, 0.8).unwrap(),
+        // 45 N of weight: held while still, it slides out once the lift accelerates it.
+        |scene| scene.set_object_properties(4.6, 0.8).unwrap(),
     );
     let mut config = SceneConfig::default();
     config.gripper.pad_friction = 0.01;
@@ -133,14 +133,16 @@ fn a_heavy_or_slippery_object_slips_out_during_the_lift() {
         SuccessRule::default(),
         |scene| scene.set_object_properties(0.1, 0.0).unwrap(),
     );
-    for (what, outcome) in [("heavy", heavy), ("slippery", slippery)] {
+    // The heavy cube rises a little before it slips; the slippery one never leaves the table.
+    for (what, outcome, lifted) in [
+        ("heavy", heavy, 0.005..0.05),
+        ("slippery", slippery, 0.0..0.005),
+    ] {
         let Some(PickFailure::ObjectSlipped { lift }) = outcome.failure else {
             panic!("{what}: {outcome:?}");
         };
-        assert!(
-            (0.0..SuccessRule::default().min_lift).contains(&lift),
-            "{what}: lifted {lift} m"
-        );
+        assert!(lifted.contains(&lift), "{what}: lifted {lift} m");
+        assert!(outcome.final_lift < 0.005, "{what}: {outcome:?}");
         let message = outcome.failure.unwrap().to_string();
         assert!(
             message.contains("slipped") && message.contains(&format!("{:.1} cm", lift * 100.0)),
