@@ -54,13 +54,12 @@ fn scripted_pick(args: &ScriptedPickArgs) -> Result<()> {
         rule,
         |seed, outcome| {
             if args.verbose {
+                let result = match &outcome.failure {
+                    None => "success".to_string(),
+                    Some(failure) => format!("FAILED ({failure})"),
+                };
                 println!(
-                    "  seed {seed:>5}: {} lift {:.3} m, hold drift {:.2} mm",
-                    if outcome.success {
-                        "success"
-                    } else {
-                        "FAILED "
-                    },
+                    "  seed {seed:>5}: {result}, lift {:.3} m, hold drift {:.2} mm",
                     outcome.final_lift,
                     outcome.hold_drift * 1000.0
                 );
@@ -68,8 +67,8 @@ fn scripted_pick(args: &ScriptedPickArgs) -> Result<()> {
         },
     )?;
     let elapsed = started.elapsed().as_secs_f64();
-    for (seed, reason) in &report.failures {
-        println!("  seed {seed}: failed: {reason}");
+    for (seed, failure) in &report.failures {
+        println!("  seed {seed}: failed: {failure}");
     }
     println!(
         "success: {}/{} ({:.1}%)  [rule: closed on object, lifted > {:.0} cm, within {:.0} cm of the TCP, {} consecutive control steps]",
@@ -80,6 +79,13 @@ fn scripted_pick(args: &ScriptedPickArgs) -> Result<()> {
         rule.max_offset * 100.0,
         rule.hold_steps
     );
+    let counts = report.failure_counts();
+    if !counts.is_empty() {
+        println!("failures by reason:");
+        for (kind, count) in counts {
+            println!("  {count:>5}  {kind}");
+        }
+    }
     println!(
         "cube drift relative to the fingers during the 1 s hold: max {:.2} mm, mean {:.2} mm",
         report.max_drift * 1000.0,

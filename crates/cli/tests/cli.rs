@@ -90,11 +90,17 @@ fn inspect_reports_a_broken_urdf_without_panicking() {
     let xacro = dir.path().join("arm.urdf.xacro");
     std::fs::write(
         &xacro,
-        r#"<robot xmlns:xacro="http://www.ros.org/wiki/xacro"/>"#,
+        "<robot name=\"r\" xmlns:xacro=\"http://www.ros.org/wiki/xacro\">\n\
+         <xacro:include filename=\"arm_macros.xacro\"/>\n</robot>",
     )
     .unwrap();
     let (_, stderr) = text(&fairgrasp(&["inspect", xacro.to_str().unwrap()]));
-    assert!(stderr.contains("expand it"), "{stderr}");
+    assert!(
+        stderr.contains("line 2")
+            && stderr.contains("<xacro:include>")
+            && stderr.contains("expand it"),
+        "{stderr}"
+    );
 
     let (_, stderr) = text(&fairgrasp(&["inspect", "/no/such/robot.urdf"]));
     assert!(stderr.contains("/no/such/robot.urdf"), "{stderr}");
@@ -107,6 +113,34 @@ fn scripted_pick_demo_reports_success_rate_and_drift() {
     assert!(out.status.success(), "{stderr}");
     assert!(stdout.contains("success: 3/3"), "{stdout}");
     assert!(stdout.contains("drift"), "{stdout}");
+}
+
+#[test]
+fn scripted_pick_demo_breaks_failures_down_by_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let heavy = dir.path().join("heavy.toml");
+    // 200 N of cube: the fingers cannot hold it.
+    std::fs::write(&heavy, "[object]\nmass = 20.0\n").unwrap();
+    let out = fairgrasp(&[
+        "demo",
+        "scripted-pick",
+        "--episodes",
+        "2",
+        "--verbose",
+        "--config",
+        heavy.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("success: 0/2"), "{stdout}");
+    assert!(
+        stdout.contains("FAILED (the object slipped out of the fingers"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("failures by reason:\n      2  object slipped out of the fingers\n"),
+        "{stdout}"
+    );
 }
 
 #[test]

@@ -2,11 +2,15 @@
 //!
 //! The script: open, move above an object with the fingers across its narrowest width, descend,
 //! close, lift, hold. It drives the arm only through joint position targets (what a policy will do), so
-//! its success shows the scene can be grasped with the controls the environment exposes.
+//! its success shows the scene can be grasped with the controls the environment exposes. A failed
+//! pick says why ([`PickFailure`]).
 
-use crate::error::Result;
+use crate::error::{Result, SimError};
 use crate::scene::Scene;
 use rapier3d::na::{Isometry3, Point3, Vector3};
+use std::cell::Cell;
+use std::collections::BTreeMap;
+use std::fmt;
 
 /// The task's success rule: gripper closed on the object, object lifted, object centred in the
 /// gripper, all held for a number of consecutive control steps.
@@ -128,11 +132,136 @@ impl Default for PickScript {
     }
 }
 
+/// The stages of the scripted pick, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PickPhase {
+    /// Moving above the object in joint space.
+    Approach,
+    /// Descending in a straight line to the grasp pose.
+    Descend,
+    /// Closing the fingers.
+    Close,
+    /// Lifting in a straight line.
+    Lift,
+    /// Holding still.
+    Hold,
+}
+
+impl fmt::Display for PickPhase {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            PickPhase::Approach => "approach",
+            PickPhase::Descend => "descent",
+            PickPhase::Close => "close",
+            PickPhase::Lift => "lift",
+            PickPhase::Hold => "hold",
+        })
+    }
+}
+
+/// Why a scripted pick failed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PickFailure {
+    /// Inverse kinematics found no joint vector for a pose the script needed in `phase`.
+    Unreachable { phase: PickPhase },
+    /// When the fingers had closed, they did not hold the object between both pads.
+    FingersMissed,
+    /// The object was gripped after closing but was no longer held up at the end. `lift` is the
+    /// highest its centre rose above rest during the lift and hold (m).
+    ObjectSlipped { lift: f64 },
+    /// At the end the object was gripped and lifted, but its centre was `offset` (m) from the TCP,
+    /// more than the rule's `max_offset` (m).
+    HeldOffCentre { offset: f64, max_offset: f64 },
+    /// At the end the object was gripped, lifted and centred, but the rule never held for
+    /// `hold_steps` consecutive steps; the longest run was `longest_run` steps.
+    TimedOut { longest_run: u32, hold_steps: u32 },
+    /// The simulation failed (e.g. its state became non-finite).
+    Simulation { message: String },
+}
+
+impl PickFailure {
+    /// The reason without its measurements, for counting.
+    pub fn kind(&self) -> FailureKind {
+        match self {
+            PickFailure::Unreachable { .. } => FailureKind::Unreachable,
+            PickFailure::FingersMissed => FailureKind::FingersMissed,
+            PickFailure::ObjectSlipped { .. } => FailureKind::ObjectSlipped,
+            PickFailure::HeldOffCentre { .. } => FailureKind::HeldOffCentre,
+            PickFailure::TimedOut { .. } => FailureKind::TimedOut,
+            PickFailure::Simulation { .. } => FailureKind::Simulation,
+        }
+    }
+}
+
+impl fmt::Display for PickFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PickFailure::Unreachable { phase } => {
+                match phase {
+                    PickPhase::Approach => f.write_str("pre-grasp pose")?,
+                    PickPhase::Descend => f.write_str("descent to the grasp pose")?,
+                    other => write!(f, "{other} pose")?,
+                }
+                f.write_str(" unreachable (IK found no solution)")
+            }
+            PickFailure::FingersMissed => {
+                f.write_str("the fingers closed without gripping the object between both pads")
+            }
+            PickFailure::ObjectSlipped { lift } => write!(
+                f,
+                "the object slipped out of the fingers (lifted at most {:.1} cm)",
+                lift * 100.0
+            ),
+            PickFailure::HeldOffCentre { offset, max_offset } => write!(
+                f,
+                "the object was held {:.1} cm from the TCP, more than the {:.1} cm allowed",
+                offset * 100.0,
+                max_offset * 100.0
+            ),
+            PickFailure::TimedOut {
+                longest_run,
+                hold_steps,
+            } => write!(
+                f,
+                "timed out before the hold ended (the success rule held for at most \
+                 {longest_run} of the {hold_steps} consecutive steps it needs)"
+            ),
+            PickFailure::Simulation { message } => write!(f, "the simulation failed: {message}"),
+        }
+    }
+}
+
+/// The kinds of [`PickFailure`], for counting failures by reason.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum FailureKind {
+    Unreachable,
+    FingersMissed,
+    ObjectSlipped,
+    HeldOffCentre,
+    TimedOut,
+    Simulation,
+}
+
+impl fmt::Display for FailureKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            FailureKind::Unreachable => "pose unreachable (IK found no solution)",
+            FailureKind::FingersMissed => "fingers closed without gripping the object",
+            FailureKind::ObjectSlipped => "object slipped out of the fingers",
+            FailureKind::HeldOffCentre => "object held too far from the TCP",
+            FailureKind::TimedOut => "timed out before the hold ended",
+            FailureKind::Simulation => "simulation failed",
+        })
+    }
+}
+
 /// What happened in one scripted pick.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PickOutcome {
     /// The success rule held for its consecutive steps at some point.
     pub success: bool,
+    /// Why the pick failed; `None` exactly when it succeeded.
+    pub failure: Option<PickFailure>,
     /// Largest displacement of the object relative to the TCP during the hold (m).
     pub hold_drift: f64,
     /// Object lift above rest at the end (m).
@@ -147,26 +276,55 @@ fn smooth(s: f64) -> f64 {
     s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
 }
 
-/// Runs the scripted pick of object `object` (its index) on a freshly reset scene: approach,
-/// descend, close, lift, hold.
+/// Runs the scripted pick on a freshly reset scene: approach, descend, close, lift, hold.
+///
+/// A pose the arm cannot reach ends the pick early as [`PickFailure::Unreachable`]; other
+/// simulation errors are returned.
 pub fn run_scripted_pick(
     scene: &mut Scene,
     object: usize,
     script: &PickScript,
     rule: SuccessRule,
 ) -> Result<PickOutcome> {
+    let phase = Cell::new(PickPhase::Approach);
     let mut tracker = SuccessTracker::new(rule);
     let mut success = false;
+    let mut longest_run = 0u32;
     let mut steps = 0u32;
+    let mut gripped_after_close = false;
+    let mut highest_lift = 0.0f64;
     let mut step = |scene: &mut Scene| -> Result<()> {
         scene.step_control()?;
         steps += 1;
-        success |= tracker.update(&GraspStatus::of(scene, object));
+        let status = GraspStatus::of(scene, object);
+        success |= tracker.update(&status);
+        longest_run = longest_run.max(tracker.consecutive());
+        match phase.get() {
+            // Its value at the last closing step is what counts.
+            PickPhase::Close => gripped_after_close = status.closed_on_object,
+            PickPhase::Lift | PickPhase::Hold => highest_lift = highest_lift.max(status.lift),
+            PickPhase::Approach | PickPhase::Descend => {}
+        }
         Ok(())
     };
-    grasp_and_lift(scene, object, script, &mut step)?;
+    match scripted_grasp_and_lift(scene, object, script, &phase, &mut step) {
+        Ok(()) => {}
+        Err(SimError::Ik(_)) => {
+            // The rule may already have held during a lift cut short.
+            return Ok(PickOutcome {
+                success,
+                failure: (!success).then_some(PickFailure::Unreachable { phase: phase.get() }),
+                hold_drift: 0.0,
+                final_lift: scene.object_state(object).pose.translation.z
+                    - scene.object_rest_height(object),
+                steps,
+            });
+        }
+        Err(e) => return Err(e),
+    }
 
     // Hold, measuring the object's drift relative to the TCP.
+    phase.set(PickPhase::Hold);
     let relative = |scene: &Scene| {
         let tcp = scene.tcp_pose();
         let p = scene.object_state(object).pose.translation.vector;
@@ -179,12 +337,29 @@ pub fn run_scripted_pick(
         step(scene)?;
         hold_drift = hold_drift.max((relative(scene) - at_hold).norm());
     }
-    let final_lift =
-        scene.object_state(object).pose.translation.z - scene.object_rest_height(object);
+    let end = GraspStatus::of(scene, object);
+    let failure = if success {
+        None
+    } else if !gripped_after_close {
+        Some(PickFailure::FingersMissed)
+    } else if !end.closed_on_object || end.lift <= rule.min_lift {
+        Some(PickFailure::ObjectSlipped { lift: highest_lift })
+    } else if end.offset >= rule.max_offset {
+        Some(PickFailure::HeldOffCentre {
+            offset: end.offset,
+            max_offset: rule.max_offset,
+        })
+    } else {
+        Some(PickFailure::TimedOut {
+            longest_run,
+            hold_steps: rule.hold_steps,
+        })
+    };
     Ok(PickOutcome {
         success,
+        failure,
         hold_drift,
-        final_lift,
+        final_lift: end.lift,
         steps,
     })
 }
@@ -197,6 +372,17 @@ pub fn grasp_and_lift(
     script: &PickScript,
     step: &mut dyn FnMut(&mut Scene) -> Result<()>,
 ) -> Result<()> {
+    scripted_grasp_and_lift(scene, object, script, &Cell::new(PickPhase::Approach), step)
+}
+
+/// [`grasp_and_lift`], announcing each phase in `phase` as it starts.
+fn scripted_grasp_and_lift(
+    scene: &mut Scene,
+    object: usize,
+    script: &PickScript,
+    phase: &Cell<PickPhase>,
+    step: &mut dyn FnMut(&mut Scene) -> Result<()>,
+) -> Result<()> {
     let period = scene.control_period() as f64;
     let centre = scene.object_state(object).pose.translation.vector;
     let yaw = scene.object_grasp_yaw(object);
@@ -204,6 +390,7 @@ pub fn grasp_and_lift(
     let grasp = scene.top_down_pose(centre, yaw);
 
     // 1. Open and move above the object in joint space.
+    phase.set(PickPhase::Approach);
     scene.set_gripper_open(true)?;
     let start = scene.arm_positions();
     let q_pre = scene.solve_ik(&pre, &start)?;
@@ -220,16 +407,19 @@ pub fn grasp_and_lift(
     }
 
     // 2. Descend in a straight line.
+    phase.set(PickPhase::Descend);
     let mut seed = q_pre;
     cartesian_move(scene, &pre, &grasp, script.descend_time, &mut seed, step)?;
 
     // 3. Close.
+    phase.set(PickPhase::Close);
     scene.set_gripper_open(false)?;
     for _ in 0..(script.close_time / period).ceil() as u32 {
         step(scene)?;
     }
 
     // 4. Lift.
+    phase.set(PickPhase::Lift);
     let lifted = Isometry3::from_parts(
         (grasp.translation.vector + Vector3::new(0.0, 0.0, script.lift_height)).into(),
         grasp.rotation,
@@ -266,11 +456,26 @@ pub struct PickReport {
     /// Largest and mean hold drift over successful episodes (m).
     pub max_drift: f64,
     pub mean_drift: f64,
-    /// Episodes that failed, with their seeds and a reason.
-    pub failures: Vec<(u64, String)>,
+    /// Episodes that failed, with their seeds and why.
+    pub failures: Vec<(u64, PickFailure)>,
 }
 
-/// Runs `episodes` scripted picks of object 0 with seeds `seed, seed+1, …`.
+impl PickReport {
+    /// How many episodes failed for each reason, most frequent first (ties in [`FailureKind`]
+    /// order); reasons that did not occur are left out.
+    pub fn failure_counts(&self) -> Vec<(FailureKind, u32)> {
+        let mut counts = BTreeMap::new();
+        for (_, failure) in &self.failures {
+            *counts.entry(failure.kind()).or_insert(0u32) += 1;
+        }
+        let mut counts: Vec<(FailureKind, u32)> = counts.into_iter().collect();
+        counts.sort_by_key(|&(_, count)| std::cmp::Reverse(count));
+        counts
+    }
+}
+
+/// Runs `episodes` scripted picks with seeds `seed, seed+1, …`. An episode whose simulation fails
+/// counts as [`PickFailure::Simulation`]; only a failed reset stops the evaluation.
 pub fn evaluate_scripted_pick(
     scene: &mut Scene,
     episodes: u32,
@@ -287,25 +492,101 @@ pub fn evaluate_scripted_pick(
     for e in 0..episodes as u64 {
         let episode_seed = seed.wrapping_add(e);
         scene.reset(episode_seed)?;
-        match run_scripted_pick(scene, 0, script, rule) {
-            Ok(outcome) => {
-                on_episode(episode_seed, &outcome);
-                if outcome.success {
-                    report.successes += 1;
-                    drift_sum += outcome.hold_drift;
-                    report.max_drift = report.max_drift.max(outcome.hold_drift);
-                } else {
-                    report.failures.push((
-                        episode_seed,
-                        format!("not grasped (final lift {:.3} m)", outcome.final_lift),
-                    ));
-                }
+        let outcome = match run_scripted_pick(scene, 0, script, rule) {
+            Ok(outcome) => outcome,
+            Err(e) => {
+                let failure = PickFailure::Simulation {
+                    message: e.to_string(),
+                };
+                report.failures.push((episode_seed, failure));
+                continue;
             }
-            Err(e) => report.failures.push((episode_seed, e.to_string())),
+        };
+        on_episode(episode_seed, &outcome);
+        match outcome.failure {
+            None => {
+                report.successes += 1;
+                drift_sum += outcome.hold_drift;
+                report.max_drift = report.max_drift.max(outcome.hold_drift);
+            }
+            Some(failure) => report.failures.push((episode_seed, failure)),
         }
     }
     if report.successes > 0 {
         report.mean_drift = drift_sum / report.successes as f64;
     }
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failures_are_counted_by_kind_most_frequent_first() {
+        let failures = [
+            PickFailure::FingersMissed,
+            PickFailure::ObjectSlipped { lift: 0.01 },
+            PickFailure::Unreachable {
+                phase: PickPhase::Descend,
+            },
+            PickFailure::ObjectSlipped { lift: 0.03 },
+            PickFailure::Unreachable {
+                phase: PickPhase::Approach,
+            },
+            PickFailure::ObjectSlipped { lift: 0.0 },
+        ];
+        let report = PickReport {
+            episodes: 6,
+            failures: failures
+                .into_iter()
+                .enumerate()
+                .map(|(i, f)| (i as u64, f))
+                .collect(),
+            ..PickReport::default()
+        };
+        assert_eq!(
+            report.failure_counts(),
+            [
+                (FailureKind::ObjectSlipped, 3),
+                (FailureKind::Unreachable, 2),
+                (FailureKind::FingersMissed, 1),
+            ]
+        );
+        assert!(PickReport::default().failure_counts().is_empty());
+    }
+
+    #[test]
+    fn failure_messages_give_the_measurements_in_units_a_person_reads() {
+        let cases = [
+            (
+                PickFailure::Unreachable {
+                    phase: PickPhase::Descend,
+                },
+                "descent to the grasp pose unreachable (IK found no solution)",
+            ),
+            (
+                PickFailure::ObjectSlipped { lift: 0.012 },
+                "the object slipped out of the fingers (lifted at most 1.2 cm)",
+            ),
+            (
+                PickFailure::HeldOffCentre {
+                    offset: 0.095,
+                    max_offset: 0.08,
+                },
+                "the object was held 9.5 cm from the TCP, more than the 8.0 cm allowed",
+            ),
+            (
+                PickFailure::TimedOut {
+                    longest_run: 4,
+                    hold_steps: 10,
+                },
+                "timed out before the hold ended (the success rule held for at most 4 of the 10 \
+                 consecutive steps it needs)",
+            ),
+        ];
+        for (failure, text) in cases {
+            assert_eq!(failure.to_string(), text);
+        }
+    }
 }

@@ -25,16 +25,45 @@ const CASES: &[(&str, &[&str])] = &[
         "wrong_root.urdf",
         &["<sdf>", "root element must be <robot>"],
     ),
+    // Xacro, found by content (a plain URDF that declares xmlns:xacro, or is named .xacro, loads).
     (
-        "robot.urdf.xacro",
+        "xacro_namespace.urdf",
         &[
-            "robot.urdf.xacro is a xacro file",
-            "expand it to plain URDF",
+            "line 4",
+            "xacro element <xacro:property>",
+            "this is xacro, not plain URDF",
+            "expand it first",
         ],
     ),
     (
-        "xacro_namespace.urdf",
-        &["xacro_namespace.urdf is a xacro file", "expand it"],
+        "xacro_macro.urdf",
+        &["line 5", "xacro element <xacro:macro>", "expand it first"],
+    ),
+    (
+        "xacro_include.urdf.xacro",
+        &["line 4", "xacro element <xacro:include>", "expand it first"],
+    ),
+    (
+        "xacro_substitution.urdf",
+        &[
+            "line 12",
+            "xacro substitution \"0 0 ${shoulder_height}\" in <origin xyz>",
+        ],
+    ),
+    (
+        "xacro_find.urdf",
+        &[
+            "line 12",
+            "xacro substitution \"$(find broken_description)/meshes/arm.stl\" in <mesh filename>",
+        ],
+    ),
+    (
+        "xacro_other_prefix.urdf",
+        &["line 5", "xacro element <xa:property>"],
+    ),
+    (
+        "xacro_undeclared_prefix.urdf",
+        &["line 6", "undeclared prefix `xacro:`", "expand it first"],
     ),
     // Joints.
     (

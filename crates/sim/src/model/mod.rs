@@ -7,6 +7,7 @@
 mod mesh;
 mod packages;
 mod parse;
+mod xacro;
 
 pub(crate) use mesh::load_mesh;
 pub use mesh::{MeshCollision, TriangleMesh};

@@ -1,12 +1,12 @@
 //! URDF text → [`RobotModel`], with errors that name the element at fault.
 //!
-//! urdf-rs does the deserialisation. Before it, roxmltree checks that the text is well-formed XML
-//! and that every joint has a known type, because those failures would otherwise surface as serde
-//! messages without a line number or joint name.
+//! urdf-rs does the deserialisation. Before it, roxmltree checks that the text is well-formed XML,
+//! holds no xacro, and that every joint has a known type, because those failures would otherwise
+//! surface as serde messages without a line number or joint name.
 
 use super::{
     Geometry, Inertial, Joint, JointKind, JointLimits, Link, LoadOptions, Mimic, Origin,
-    RobotModel, Shape, mesh, packages,
+    RobotModel, Shape, mesh, packages, xacro,
 };
 use crate::error::{Result, SimError};
 use std::collections::HashMap;
@@ -27,11 +27,6 @@ pub(super) fn parse_urdf(
     base_dir: &Path,
     options: &LoadOptions,
 ) -> Result<RobotModel> {
-    if source_name.ends_with(".xacro") || text.contains("xmlns:xacro") || text.contains("<xacro:") {
-        return Err(SimError::Xacro {
-            path: source_name.to_string(),
-        });
-    }
     precheck_xml(text, source_name)?;
     let robot = urdf_rs::read_from_string(text).map_err(|e| {
         SimError::urdf(
@@ -43,13 +38,22 @@ pub(super) fn parse_urdf(
     build_model(&robot, source_name, base_dir, options)
 }
 
-/// Well-formedness, joint types and numeric attributes, reported with line and column.
+/// Well-formedness, xacro, joint types and numeric attributes, reported with line and column.
 fn precheck_xml(text: &str, source_name: &str) -> Result<()> {
     if text.trim().is_empty() {
         return Err(SimError::urdf(source_name, "line 1", "the file is empty"));
     }
+    let xacro_error = |line: u32, found: String| SimError::Xacro {
+        source_name: source_name.to_string(),
+        line,
+        found,
+    };
     let doc = roxmltree::Document::parse(text).map_err(|e| {
         let location = match e {
+            // xacro itself accepts `<xacro:…>` without a namespace declaration.
+            roxmltree::Error::UnknownNamespace(ref prefix, pos) if prefix == "xacro" => {
+                return xacro_error(pos.row, "undeclared prefix `xacro:`".to_string());
+            }
             // roxmltree gives these no position (it reports 1:1); the problem is at the end.
             roxmltree::Error::UnexpectedEndOfStream | roxmltree::Error::UnclosedRootNode => {
                 format!("end of file (line {})", text.lines().count().max(1))
@@ -58,6 +62,9 @@ fn precheck_xml(text: &str, source_name: &str) -> Result<()> {
         };
         SimError::urdf(source_name, location, format!("not well-formed XML: {e}"))
     })?;
+    if let Some((line, found)) = xacro::first_xacro_construct(&doc) {
+        return Err(xacro_error(line, found));
+    }
     let root = doc.root_element();
     if root.tag_name().name() != "robot" {
         return Err(SimError::urdf(

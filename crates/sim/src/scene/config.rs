@@ -213,6 +213,14 @@ impl Default for GripperConfig {
     }
 }
 
+/// A rigid offset as in a URDF `<origin>`: translation (m), then fixed-axis roll-pitch-yaw (rad).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MountConfig {
+    pub xyz: [f32; 3],
+    pub rpy: [f32; 3],
+}
+
 /// The arm and its drives.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -223,6 +231,12 @@ pub struct ArmConfig {
     pub package_paths: Vec<PathBuf>,
     /// Link the gripper is mounted on.
     pub flange_link: String,
+    /// Pose of the gripper's base relative to `flange_link` (at most 0.5 m away). Zero when the
+    /// flange link is the flange face, as the bundled FR5's `tool0`. Arms whose last link is not
+    /// the flange face set it: the vendor's FR5 description ends at `wrist3_link`, 0.1 m behind
+    /// the face, with no `tool0`, so it takes `flange_link = "wrist3_link"` and
+    /// `gripper_mount.xyz = [0, 0, 0.1]`.
+    pub gripper_mount: MountConfig,
     /// Base position in the world (m): on the table top by default.
     pub base_xyz: [f32; 3],
     /// Base yaw (rad).
@@ -244,6 +258,7 @@ impl Default for ArmConfig {
             urdf: None,
             package_paths: Vec::new(),
             flange_link: "tool0".into(),
+            gripper_mount: MountConfig::default(),
             base_xyz: [0.0, 0.0, 0.75],
             base_yaw: 0.0,
             // Flange pointing down, about 30 cm above the middle of the placement area.
@@ -473,6 +488,20 @@ impl SceneConfig {
         }
         if self.arm.home.iter().any(|v| !v.is_finite()) {
             return Err(SimError::config("arm.home", "must be finite"));
+        }
+        let mount = &self.arm.gripper_mount;
+        if mount.rpy.iter().any(|v| !v.is_finite()) {
+            return Err(SimError::config("arm.gripper_mount.rpy", "must be finite"));
+        }
+        let distance = mount.xyz.iter().map(|v| v * v).sum::<f32>().sqrt();
+        if !distance.is_finite() || distance > 0.5 {
+            return Err(SimError::config(
+                "arm.gripper_mount.xyz",
+                format!(
+                    "must be finite and at most 0.5 m from the flange link, got {:?}",
+                    mount.xyz
+                ),
+            ));
         }
         Ok(())
     }

@@ -19,8 +19,8 @@ mod config;
 mod objects;
 
 pub use config::{
-    ArmConfig, BinConfig, GripperConfig, MAX_GRASP_WIDTH, MAX_OBJECTS, ObjectConfig, ObjectShape,
-    PhysicsConfig, PlacementConfig, SceneConfig, TableConfig,
+    ArmConfig, BinConfig, GripperConfig, MAX_GRASP_WIDTH, MAX_OBJECTS, MountConfig, ObjectConfig,
+    ObjectShape, PhysicsConfig, PlacementConfig, SceneConfig, TableConfig,
 };
 
 use crate::error::{Result, SimError};
@@ -143,10 +143,14 @@ impl Scene {
             None => assets::fr5()?,
         };
         let gripper = assets::parallel_gripper()?;
+        let mount = &config.arm.gripper_mount;
         arm_model.attach(
             &config.arm.flange_link,
             gripper,
-            Origin::default(),
+            Origin {
+                xyz: mount.xyz.map(f64::from),
+                rpy: mount.rpy.map(f64::from),
+            },
             "gripper_mount",
         )?;
 
