@@ -119,8 +119,12 @@ fn scripted_pick_demo_reports_success_rate_and_drift() {
 fn scripted_pick_demo_breaks_failures_down_by_reason() {
     let dir = tempfile::tempdir().unwrap();
     let heavy = dir.path().join("heavy.toml");
-    // 200 N of cube: the fingers cannot hold it.
-    std::fs::write(&heavy, "[object]\nmass = 20.0\n").unwrap();
+    // 45 N of cube: held while still, it slides out once the lift accelerates it.
+    std::fs::write(
+        &heavy,
+        "[[objects]]\nname = \"cube\"\nshape = { kind = \"box\", size = [0.05, 0.05, 0.05] }\nmass = 4.6\n",
+    )
+    .unwrap();
     let out = fairgrasp(&[
         "demo",
         "scripted-pick",

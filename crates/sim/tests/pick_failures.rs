@@ -206,7 +206,7 @@ fn a_hold_longer_than_the_script_times_out() {
 #[test]
 fn the_report_counts_failures_by_reason() {
     let mut config = SceneConfig::default();
-    config.objects[0].mass = 20.0;
+    config.objects[0].mass = 4.6;
     let mut scene = Scene::new(config).unwrap();
     let mut seen = Vec::new();
     let report = evaluate_scripted_pick(
