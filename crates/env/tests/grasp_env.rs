@@ -382,3 +382,50 @@ fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages()
     assert!(step.terminated);
     assert_eq!(step.info.reward_terms.value("off_table"), -99.0);
 }
+
+#[test]
+fn random_shapes_draw_boxes_and_cylinders_in_range_and_show_their_size() {
+    use fairgrasp_env::sim::scene::ObjectShape;
+    let mut env = env_with(|c| c.shapes.enabled = true);
+    let plain = env_with(|_| {});
+    // Five more values: the half extents and the twofold relative yaw.
+    assert_eq!(
+        env.observation_space().dim(),
+        plain.observation_space().dim() + 5
+    );
+    let ranges = env.config().shapes.clone();
+    let (mut boxes, mut cylinders) = (0, 0);
+    for seed in 0..30 {
+        let (obs, _) = env.reset(Some(seed)).unwrap();
+        let shape = env.scene().object_config(0).shape.clone();
+        let half = env.scene().object_half_extents(0);
+        match shape {
+            ObjectShape::Box { size } => {
+                boxes += 1;
+                assert!(
+                    size.iter()
+                        .all(|s| (ranges.box_side[0]..=ranges.box_side[1]).contains(s))
+                );
+            }
+            ObjectShape::Cylinder { radius, height } => {
+                cylinders += 1;
+                assert!((ranges.cylinder_radius[0]..=ranges.cylinder_radius[1]).contains(&radius));
+                assert!((ranges.cylinder_height[0]..=ranges.cylinder_height[1]).contains(&height));
+                assert!((half[2] - height / 2.0).abs() < 1e-4);
+            }
+            other => panic!("{other:?} was not asked for"),
+        }
+        let n = obs.len();
+        assert_eq!(&obs[n - 5..n - 2], &half);
+        // It rests on the table at its own half height.
+        let rest = env.scene().object_state(0).pose.translation.z - env.scene().table_top() as f64;
+        assert!(
+            (rest - half[2] as f64).abs() < 2e-3,
+            "seed {seed}: {rest} vs {half:?}"
+        );
+    }
+    assert!(
+        boxes > 5 && cylinders > 5,
+        "{boxes} boxes, {cylinders} cylinders"
+    );
+}

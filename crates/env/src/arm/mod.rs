@@ -26,7 +26,7 @@ use crate::error::{EnvError, Result};
 use crate::spaces::BoxSpace;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::kinematics::SerialChain;
-use fairgrasp_sim::scene::{ObjectShape, PhysicalParams, Scene, SceneConfig};
+use fairgrasp_sim::scene::{PhysicalParams, Scene, SceneConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::VecDeque;
@@ -106,8 +106,6 @@ pub struct ArmEnv<T: Task> {
     observation_space: BoxSpace,
     action_space: BoxSpace,
     noise_groups: Vec<(Range<usize>, NoiseGroup)>,
-    /// The nominal shape of each object (before shape randomisation and scaling).
-    nominal_shapes: Vec<ObjectShape>,
     episode: Option<Episode>,
 }
 
@@ -141,16 +139,12 @@ impl<T: Task> ArmEnv<T> {
             &zeros,
             &mut ObsWriter::recording(&mut obs, &mut noise_groups),
         );
-        let nominal_shapes = (0..scene.num_objects())
-            .map(|i| scene.object_config(i).shape.clone())
-            .collect();
         Ok(Self {
             observation_space: BoxSpace::unbounded(obs.len()),
             noise_groups,
             action_space,
             mapper,
             task,
-            nominal_shapes,
             rng: ChaCha8Rng::seed_from_u64(0),
             scene,
             config,
@@ -214,11 +208,12 @@ impl<T: Task> ArmEnv<T> {
         }
         self.scene.restore_home(&params, &jitter)?;
         for i in 0..self.scene.num_objects() {
-            let nominal = self.scene.object_config(i).clone();
+            // As configured (before shape randomisation and scaling).
+            let nominal = self.scene.config().objects[i].clone();
             let mut shape = if self.config.shapes.enabled {
                 crate::tasks::shapes::draw(&self.config.shapes, &mut self.rng)
             } else {
-                self.nominal_shapes[i].clone()
+                nominal.shape
             };
             let (mut mass, mut friction) = (nominal.mass, nominal.friction);
             if d.enabled {
