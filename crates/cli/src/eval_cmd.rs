@@ -56,20 +56,22 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let meta = policy.meta();
     if args.json {
         println!(
-            "{{\"model\": {:?}, \"algo\": {:?}, \"trained_steps\": {}, \"episodes\": {}, \"seed\": {}, \"success_rate\": {}, \"mean_return\": {}, \"mean_length\": {}, \"seconds\": {seconds:.2}}}",
+            "{{\"model\": {:?}, \"env_id\": {:?}, \"algo\": {:?}, \"trained_steps\": {}, \"episodes\": {}, \"seed\": {}, \"success_rate\": {}, \"mean_return\": {}, \"mean_length\": {}, \"final_extras\": {}, \"seconds\": {seconds:.2}}}",
             dir,
+            env_id,
             meta.algo,
             meta.num_timesteps,
             args.episodes,
             args.seed,
             result.success_rate,
             result.mean_return,
-            result.mean_length
+            result.mean_length,
+            serde_json::to_string(&result.final_extras)?
         );
     } else {
         println!(
-            "{} ({}, trained {} steps), {} episodes from seed {}:",
-            dir, meta.algo, meta.num_timesteps, args.episodes, args.seed
+            "{} ({} on {}, trained {} steps), {} episodes from seed {}:",
+            dir, meta.algo, env_id, meta.num_timesteps, args.episodes, args.seed
         );
         println!(
             "  success rate {:.1}% ({} of {})",
@@ -79,6 +81,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         );
         println!("  mean return  {:.2}", result.mean_return);
         println!("  mean length  {:.1} steps", result.mean_length);
+        for (name, value) in result.final_extras.iter() {
+            println!("  {name:<12} {value:.3} (mean at the episode's end)");
+        }
         println!("  ({seconds:.1} s)");
     }
     Ok(())
