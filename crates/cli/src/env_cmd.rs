@@ -2,10 +2,15 @@
 
 use anyhow::{Context, Result};
 use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::arm::{ArmEnv, Task};
 use fairgrasp_env::check::{CheckReport, check_env};
+use fairgrasp_env::config::from_table;
 use fairgrasp_env::config::{apply_override, read_table};
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::sim::rapier3d::na::{Isometry3, Point3, Vector3};
 use fairgrasp_env::tasks::grasp::{GraspConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::tasks::pick_place::PickPlaceEnv;
+use fairgrasp_env::tasks::sort::SortEnv;
 use fairgrasp_env::{Env, EpisodeEvent, GraspEnv, Info, VecEnv, VectorEnv, registry};
 use rand::SeedableRng;
 use std::path::PathBuf;
@@ -68,7 +73,7 @@ pub enum EnvCommand {
     Check(CheckArgs),
     /// Random actions: throughput and episode statistics.
     Random(RandomArgs),
-    /// The scripted grasp policy driven through step(): success rate.
+    /// A scripted policy driven through step() (grasp, pick and place, sorting): success rate.
     Scripted(ScriptedArgs),
     /// Print the effective configuration as TOML (the defaults, with --config/--set applied).
     Config(EnvArgs),
@@ -370,35 +375,89 @@ impl RolloutStats {
     }
 }
 
+/// One scripted episode of an arm task: `(success, steps)`. The plan picks each object in
+/// turn, carrying it to `goal(env, i)` when there is one and releasing it there if `release`.
+fn scripted_episode<T: Task>(
+    env: &mut ArmEnv<T>,
+    seed: u64,
+    goal: impl Fn(&ArmEnv<T>, usize) -> Option<Vector3<f64>>,
+    objects: usize,
+    release: bool,
+) -> Result<(bool, u32)> {
+    env.reset(Some(seed))?;
+    for i in 0..objects {
+        let mut policy = ScriptedGraspPolicy::for_object(env, i, goal(env, i), release);
+        while !policy.done() {
+            let step = env.step(&policy.act(env))?;
+            if step.terminated || step.truncated {
+                return Ok((step.info.success, step.info.elapsed_steps));
+            }
+        }
+    }
+    // Every object placed without the success rule holding: wait out the episode.
+    loop {
+        let mut hold = vec![0.0; env.action_space().dim()];
+        *hold.last_mut().expect("a gripper entry") = 1.0;
+        let step = env.step(&hold)?;
+        if step.terminated || step.truncated {
+            return Ok((step.info.success, step.info.elapsed_steps));
+        }
+    }
+}
+
 fn scripted(args: &ScriptedArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    let config = args.env.grasp_config()?;
-    let mode = config.control.action_mode;
-    let mut env = GraspEnv::new(config)?;
+    let table = args.env.table()?;
+    let mode = table
+        .get("control")
+        .and_then(|c| c.get("action_mode"))
+        .and_then(|m| m.as_str())
+        .unwrap_or("joint")
+        .to_string();
+    let world_goal =
+        |base: Isometry3<f64>, local: Vector3<f64>| (base * Point3::from(local)).coords;
+    let mut run: Box<dyn FnMut(u64) -> Result<(bool, u32)>> = match args.env.id.as_str() {
+        "FaArmGrasp-v0" => {
+            let mut env = GraspEnv::new(from_table(table)?)?;
+            Box::new(move |seed| scripted_episode(&mut env, seed, |_, _| None, 1, false))
+        }
+        "FaArmPickPlace-v0" => {
+            let mut env = PickPlaceEnv::new(from_table(table)?)?;
+            Box::new(move |seed| {
+                let goal =
+                    |e: &PickPlaceEnv, _| Some(world_goal(e.scene().base_pose(), e.task().goal()));
+                scripted_episode(&mut env, seed, goal, 1, false)
+            })
+        }
+        "FaArmSort-v0" => {
+            let mut env = SortEnv::new(from_table(table)?)?;
+            let n = env.scene().num_objects();
+            Box::new(move |seed| {
+                let goal = |e: &SortEnv, i| {
+                    Some(world_goal(e.scene().base_pose(), e.task().drop_point(i)))
+                };
+                scripted_episode(&mut env, seed, goal, n, true)
+            })
+        }
+        other => anyhow::bail!("no scripted policy for {other}; it has the arm tasks only"),
+    };
     let started = Instant::now();
     let mut successes = 0;
     let mut lengths = 0u64;
     let mut failed = Vec::new();
     for i in 0..args.episodes as u64 {
         let seed = args.seed + i;
-        env.reset(Some(seed))?;
-        let mut policy = ScriptedGraspPolicy::new(&env);
-        loop {
-            let action = policy.act(&env);
-            let step = env.step(&action)?;
-            if step.terminated || step.truncated {
-                if step.info.success {
-                    successes += 1;
-                    lengths += step.info.elapsed_steps as u64;
-                } else {
-                    failed.push(seed);
-                }
-                break;
-            }
+        let (success, steps) = run(seed)?;
+        if success {
+            successes += 1;
+            lengths += steps as u64;
+        } else {
+            failed.push(seed);
         }
     }
     println!(
-        "scripted policy through step(), {mode:?} mode: {successes}/{} successes ({:.1}%), mean length of successful episodes {:.1} steps, {:.1} s",
+        "scripted policy through step(), {} in {mode} mode: {successes}/{} successes ({:.1}%), mean length of successful episodes {:.1} steps, {:.1} s",
+        args.env.id,
         args.episodes,
         100.0 * successes as f64 / args.episodes as f64,
         lengths as f64 / successes.max(1) as f64,

@@ -263,3 +263,59 @@ fn training_killed_with_sigkill_resumes_from_its_last_checkpoint_and_evaluates()
     assert!(stderr.contains("model.safetensors"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+#[test]
+fn env_commands_take_any_registered_id() {
+    let (stdout, stderr) = text(&fairgrasp(&["env", "list"]));
+    for id in [
+        "FaArmGrasp-v0",
+        "FaArmPickPlace-v0",
+        "FaArmSort-v0",
+        "Pendulum-v1",
+        "PointReach-v0",
+    ] {
+        assert!(stdout.contains(id), "{id} not listed: {stdout}{stderr}");
+    }
+    let out = fairgrasp(&[
+        "env",
+        "config",
+        "--env",
+        "FaArmSort-v0",
+        "--set",
+        "task.num_objects=4",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("num_objects = 4"), "{stdout}");
+    assert!(
+        stdout.contains("[control]") && stdout.contains("[shapes]"),
+        "{stdout}"
+    );
+
+    let out = fairgrasp(&[
+        "env",
+        "random",
+        "--env",
+        "FaArmPickPlace-v0",
+        "--steps",
+        "50",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("FaArmPickPlace-v0"), "{stdout}");
+
+    // Unknown ids and keys name themselves and the ids there are.
+    let (_, stderr) = text(&fairgrasp(&["env", "config", "--env", "FaArmJuggle-v9"]));
+    assert!(
+        stderr.contains("FaArmJuggle-v9") && stderr.contains("FaArmSort-v0"),
+        "{stderr}"
+    );
+    let (_, stderr) = text(&fairgrasp(&[
+        "train",
+        "--env",
+        "FaArmSort-v0",
+        "--set",
+        "env.task.num_bins=7",
+    ]));
+    assert!(stderr.contains("num_bins"), "{stderr}");
+}
