@@ -18,6 +18,14 @@ pub(crate) fn check_range(key: &str, r: [f32; 2], min: f32, max: f32) -> Result<
     Ok(())
 }
 
+pub(crate) fn check_at_least_one(key: &str, v: u32) -> Result<()> {
+    if v >= 1 {
+        Ok(())
+    } else {
+        Err(EnvError::config(key, "must be at least 1"))
+    }
+}
+
 pub(crate) fn check_positive(key: &str, v: f32) -> Result<()> {
     if v.is_finite() && v > 0.0 {
         Ok(())

@@ -9,7 +9,7 @@ use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
     TaskSettings,
 };
-use crate::config::{check_non_negative, check_positive};
+use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
 use fairgrasp_sim::scene::Scene;
@@ -71,20 +71,10 @@ impl TaskSettings for GraspSettings {
     }
 
     fn validate(&self) -> Result<()> {
-        if self.max_episode_steps == 0 {
-            return Err(EnvError::config(
-                "task.max_episode_steps",
-                "must be at least 1",
-            ));
-        }
+        check_at_least_one("task.max_episode_steps", self.max_episode_steps)?;
         check_positive("task.success_min_lift", self.success_min_lift)?;
         check_positive("task.success_max_offset", self.success_max_offset)?;
-        if self.success_hold_steps == 0 {
-            return Err(EnvError::config(
-                "task.success_hold_steps",
-                "must be at least 1",
-            ));
-        }
+        check_at_least_one("task.success_hold_steps", self.success_hold_steps)?;
         Ok(())
     }
 }

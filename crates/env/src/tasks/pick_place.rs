@@ -7,7 +7,7 @@ use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
     TaskSettings,
 };
-use crate::config::{check_non_negative, check_positive};
+use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
 use crate::tasks::grasp::{Streak, rich_observation};
@@ -59,12 +59,7 @@ impl TaskSettings for PickPlaceSettings {
     }
 
     fn validate(&self) -> Result<()> {
-        if self.max_episode_steps == 0 {
-            return Err(EnvError::config(
-                "task.max_episode_steps",
-                "must be at least 1",
-            ));
-        }
+        check_at_least_one("task.max_episode_steps", self.max_episode_steps)?;
         check_non_negative("task.goal_max_height", self.goal_max_height)?;
         if self.goal_max_height > 0.35 {
             return Err(EnvError::config(
@@ -74,12 +69,7 @@ impl TaskSettings for PickPlaceSettings {
         }
         check_positive("task.goal_tolerance", self.goal_tolerance)?;
         check_positive("task.max_object_speed", self.max_object_speed)?;
-        if self.success_hold_steps == 0 {
-            return Err(EnvError::config(
-                "task.success_hold_steps",
-                "must be at least 1",
-            ));
-        }
+        check_at_least_one("task.success_hold_steps", self.success_hold_steps)?;
         Ok(())
     }
 }

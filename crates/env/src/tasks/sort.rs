@@ -10,7 +10,7 @@ use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
     TaskSettings,
 };
-use crate::config::check_non_negative;
+use crate::config::{check_at_least_one, check_non_negative};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
 use crate::tasks::grasp::rich_observation;
@@ -121,12 +121,7 @@ impl TaskSettings for SortSettings {
                 ),
             ));
         }
-        if self.max_episode_steps == 0 {
-            return Err(EnvError::config(
-                "task.max_episode_steps",
-                "must be at least 1",
-            ));
-        }
+        check_at_least_one("task.max_episode_steps", self.max_episode_steps)?;
         if !self.bin_inner_size.iter().all(|v| (0.1..=0.4).contains(v)) {
             return Err(EnvError::config(
                 "task.bin_inner_size",
