@@ -1,5 +1,21 @@
-//! Sim-to-real: policy export, calibration, the safety layer and the FAIRINO controller protocol.
+//! Sim to real: policy export, calibration, the safety layer, the FAIRINO controller protocol
+//! and a digital twin of the controller backed by the simulator.
 //!
-//! Layer 4 of fairgrasp. Built in the sim-to-real issues; this crate holds its place in the layout.
+//! Layer 4 of fairgrasp. The pieces, by folder:
+//! - [`robot`]: what any controller link offers the deployment loop (state in, commands out).
+//! - [`fairino`]: the FAIRINO controller's protocol (XML-RPC on 20003, the CNDE state stream
+//!   on 20005), client and server sides.
+//! - [`twin`]: a controller made of the simulator, serving that protocol on loopback.
+//! - [`safety`]: the layer between every policy output and the wire.
+//! - [`calibration`]: simulator joints ↔ robot joints.
+//! - [`pose_source`]: where the object's pose comes from on the real arm.
+//! - [`export`]: ONNX and safetensors files of a trained policy.
 
+pub mod error;
+pub mod pose_source;
+pub mod robot;
+
+pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};
+
+pub use error::{DeployError, Result};
 pub use fairgrasp_sim as sim;

@@ -194,6 +194,14 @@ impl Sort {
         self.bins[bin] + Vector3::new(dx, dy, self.drop_height)
     }
 
+    /// Whether object `i`'s centre lies over the inside of its own bin (any height).
+    fn over_own_bin(&self, i: usize, s: &ArmState) -> bool {
+        let bin = self.bins[self.assignment[i]];
+        let at = s.objects[i].pose.translation.vector;
+        let [hx, hy] = self.settings.bin_inner_size.map(|v| v as f64 / 2.0);
+        (at.x - bin.x).abs() <= hx && (at.y - bin.y).abs() <= hy
+    }
+
     /// Each object's bin this episode.
     pub fn assignment(&self) -> &[usize] {
         &self.assignment
@@ -310,9 +318,14 @@ impl Task for Sort {
                 newly += 1;
             }
         }
-        // Progress of the active object in [0, 1]: reach, grasp, carry to its drop point.
-        let progress = match self.active() {
+        // Stage of the active object in [0, 1]: reach, grasp, carry to its drop point, and
+        // full once it is over its bin, held or falling, so that letting go there never
+        // lowers the reward (it only adds the sort bonus once the object rests). Session 4's
+        // reward divided this stage by n and dropped it on release: the policy grasped
+        // 97 % of the time and never sorted one object in 55 minutes.
+        let stage = match self.active() {
             None => 1.0,
+            Some(i) if self.over_own_bin(i, s) => 1.0,
             Some(i) => {
                 let grasped = s.grasped(i);
                 let reach = 1.0 - (4.0 * s.tcp_to_object(i).norm() as f32).tanh();
@@ -327,8 +340,9 @@ impl Task for Sort {
         };
         let count = e.extras.value("objects_sorted");
         let mut terms = NamedValues::new();
-        // ≤ 0 per step before success, rising with every object sorted.
-        terms.set("progress", (count + progress) / n - 1.0);
+        // In [-n, 0] per step: each object sorted is worth a whole stage, so carrying the
+        // active object pays as much as the pick-and-place task's carry does.
+        terms.set("progress", count + stage - n);
         terms.set("object_sorted", newly as f32 * self.reward.object_sorted);
         let off = e.failure.is_some();
         terms.set("off_table", if off { -(steps_left as f32) } else { 0.0 });

@@ -1,0 +1,152 @@
+//! What the deployment loop needs from a robot controller, whatever carries it: the FAIRINO
+//! client over the network ([`crate::fairino`]), the digital twin, or a recording stub in tests.
+//!
+//! Everything here is in the controller's units (degrees, millimetres), as on the wire.
+
+use crate::Result;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// One state report of the controller (a CNDE frame, decoded).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RobotState {
+    /// Joint angles (deg), j1…j6.
+    pub joints_deg: [f64; 6],
+    /// Joint speeds (deg/s).
+    pub joint_speeds_deg: [f64; 6],
+    /// TCP pose: x, y, z (mm), rx, ry, rz (deg), in the controller's base frame.
+    pub tcp: [f64; 6],
+    /// 1 stop, 2 run, 3 pause, 4 drag.
+    pub robot_state: u8,
+    /// 0 automatic, 1 manual.
+    pub robot_mode: u8,
+    /// The controller's fault: 0 and 0 when none.
+    pub main_code: i32,
+    pub sub_code: i32,
+    /// The arm is in position (no motion under way).
+    pub motion_done: bool,
+    pub emergency_stop: bool,
+    /// Safety stop inputs 0 and 1.
+    pub safety_stop: [bool; 2],
+    /// The drives are enabled.
+    pub enabled: bool,
+    /// Gripper position, % of its stroke (0 closed … 100 open).
+    pub gripper_position: u8,
+    pub gripper_motion_done: bool,
+    pub gripper_active: bool,
+    pub gripper_fault: i32,
+}
+
+impl Default for RobotState {
+    fn default() -> Self {
+        Self {
+            joints_deg: [0.0; 6],
+            joint_speeds_deg: [0.0; 6],
+            tcp: [0.0; 6],
+            robot_state: 1,
+            robot_mode: 0,
+            main_code: 0,
+            sub_code: 0,
+            motion_done: true,
+            emergency_stop: false,
+            safety_stop: [false; 2],
+            enabled: true,
+            gripper_position: 100,
+            gripper_motion_done: true,
+            gripper_active: true,
+            gripper_fault: 0,
+        }
+    }
+}
+
+/// A state with the moment this process received it.
+#[derive(Clone, Debug)]
+pub struct StampedState {
+    pub state: RobotState,
+    pub received_at: Instant,
+    /// Counts received states; a stalled stream stops counting.
+    pub sequence: u64,
+}
+
+/// A command to the controller: the XML-RPC calls the deployment loop makes, with the
+/// controller's own argument conventions (see `fairino-controller.md`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "call")]
+pub enum RobotCommand {
+    RobotEnable {
+        enable: bool,
+    },
+    /// 0 automatic, 1 manual.
+    Mode {
+        mode: u8,
+    },
+    /// Global speed override, 1–100 %.
+    SetSpeed {
+        percent: u8,
+    },
+    /// Blocking joint move; `speed_percent` of the controller's maximum.
+    MoveJ {
+        joints_deg: [f64; 6],
+        speed_percent: f64,
+    },
+    ServoMoveStart,
+    /// One servo set point, reached in `cmd_t` seconds (0.001–0.016).
+    ServoJ {
+        joints_deg: [f64; 6],
+        cmd_t: f64,
+    },
+    ServoMoveEnd,
+    StopMotion,
+    ResetAllError,
+    ActGripper {
+        index: u8,
+        activate: bool,
+    },
+    /// `position_percent`: 0 closed … 100 open; non-blocking.
+    MoveGripper {
+        index: u8,
+        position_percent: u8,
+        speed_percent: u8,
+        force_percent: u8,
+        max_time_ms: u32,
+    },
+}
+
+impl RobotCommand {
+    /// The XML-RPC method name.
+    pub fn method(&self) -> &'static str {
+        match self {
+            Self::RobotEnable { .. } => "RobotEnable",
+            Self::Mode { .. } => "Mode",
+            Self::SetSpeed { .. } => "SetSpeed",
+            Self::MoveJ { .. } => "MoveJ",
+            Self::ServoMoveStart => "ServoMoveStart",
+            Self::ServoJ { .. } => "ServoJ",
+            Self::ServoMoveEnd => "ServoMoveEnd",
+            Self::StopMotion => "StopMotion",
+            Self::ResetAllError => "ResetAllError",
+            Self::ActGripper { .. } => "ActGripper",
+            Self::MoveGripper { .. } => "MoveGripper",
+        }
+    }
+
+    /// Whether the command can make the arm or the gripper move.
+    pub fn moves(&self) -> bool {
+        matches!(
+            self,
+            Self::MoveJ { .. } | Self::ServoJ { .. } | Self::MoveGripper { .. }
+        )
+    }
+}
+
+/// A link to a controller. Implementations put a timeout on every call and never retry on
+/// their own: a failed call is an error for the caller (the safety layer stops the arm).
+pub trait RobotLink: Send {
+    /// The newest state received, or an error when the stream has failed. Does not block.
+    fn latest_state(&self) -> Result<StampedState>;
+
+    /// Sends one command and waits for the controller's reply (bounded by the link's
+    /// timeout; `MoveJ` blocks until the motion ends, bounded by its own timeout).
+    /// A non-zero error code is a [`crate::DeployError::Controller`].
+    fn send(&mut self, command: &RobotCommand) -> Result<()>;
+}
