@@ -11,9 +11,13 @@
 //! - [`pose_source`]: where the object's pose comes from on the real arm.
 //! - [`export`]: ONNX and safetensors files of a trained policy.
 
+pub mod atomic;
+pub mod calibration;
 pub mod error;
+pub mod kinematics;
 pub mod pose_source;
 pub mod robot;
+pub mod safety;
 
 pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};
 

@@ -1,0 +1,101 @@
+//! Why the deployment loop stopped the arm.
+
+use std::fmt;
+
+/// A reason to stop the arm. Its text names the cause and what to look at.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Fault {
+    /// No fresh state from the controller within the deadline.
+    StaleState {
+        age_ms: f64,
+        deadline_ms: f64,
+    },
+    /// The state stream failed (closed, reset, unreadable).
+    StreamFailed(String),
+    /// A call to the controller failed or timed out.
+    CallFailed {
+        call: String,
+        message: String,
+    },
+    /// The controller reports a fault in `main_code` / `sub_code`.
+    ControllerFault {
+        main_code: i32,
+        sub_code: i32,
+        meaning: String,
+    },
+    EmergencyStop,
+    /// Safety stop input 0 or 1.
+    SafetyStop(usize),
+    /// The policy gave NaN or an infinite value (or a wrong number of values).
+    NonFiniteOutput {
+        index: usize,
+        value: f32,
+    },
+    /// Even the strongest allowed braking would take the TCP out of the workspace box.
+    WorkspaceExit {
+        tcp_mm: [f64; 3],
+    },
+    /// The measured arm is outside the soft limits or the box, or moving, when the loop starts.
+    UnsafeStart(String),
+    /// Ctrl-C.
+    Interrupted,
+}
+
+impl Fault {
+    /// A short name for logs and tests.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::StaleState { .. } => "stale_state",
+            Self::StreamFailed(_) => "stream_failed",
+            Self::CallFailed { .. } => "call_failed",
+            Self::ControllerFault { .. } => "controller_fault",
+            Self::EmergencyStop => "emergency_stop",
+            Self::SafetyStop(_) => "safety_stop",
+            Self::NonFiniteOutput { .. } => "non_finite_output",
+            Self::WorkspaceExit { .. } => "workspace_exit",
+            Self::UnsafeStart(_) => "unsafe_start",
+            Self::Interrupted => "interrupted",
+        }
+    }
+}
+
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::StaleState {
+                age_ms,
+                deadline_ms,
+            } => write!(
+                f,
+                "stale state: the controller's last state is {age_ms:.0} ms old (deadline \
+                 {deadline_ms:.0} ms); check the network and the CNDE stream on port 20005"
+            ),
+            Self::StreamFailed(m) => write!(f, "state stream failed: {m}"),
+            Self::CallFailed { call, message } => write!(f, "call failed: {call}: {message}"),
+            Self::ControllerFault {
+                main_code,
+                sub_code,
+                meaning,
+            } => write!(
+                f,
+                "controller fault: main_code {main_code}, sub_code {sub_code} ({meaning}); \
+                 clear it on the teach pendant or with ResetAllError"
+            ),
+            Self::EmergencyStop => write!(f, "emergency stop pressed"),
+            Self::SafetyStop(i) => write!(f, "safety stop {i} active"),
+            Self::NonFiniteOutput { index, value } => write!(
+                f,
+                "non-finite policy output: value {index} is {value}; the model or its \
+                 observation is broken"
+            ),
+            Self::WorkspaceExit { tcp_mm } => write!(
+                f,
+                "workspace exit: braking could not keep the TCP in the workspace box (it would \
+                 reach x {:.0}, y {:.0}, z {:.0} mm)",
+                tcp_mm[0], tcp_mm[1], tcp_mm[2]
+            ),
+            Self::UnsafeStart(m) => write!(f, "unsafe start: {m}"),
+            Self::Interrupted => write!(f, "interrupted (Ctrl-C)"),
+        }
+    }
+}

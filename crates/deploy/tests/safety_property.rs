@@ -1,0 +1,251 @@
+//! The safety filter against a million random policy outputs (NaN, ±inf and 1e30 among them)
+//! from random starting states of the FR5: no set point ever leaves the soft limits, the speed
+//! and acceleration caps or the workspace box.
+
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::kinematics::tcp_forward_kinematics;
+use fairgrasp_deploy::safety::{Fault, SafetyConfig, SafetyFilter};
+use fairgrasp_env::arm::ArmState;
+use fairgrasp_env::sim::kinematics::SerialChain;
+use fairgrasp_env::{GraspConfig, GraspEnv};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+struct Arm {
+    home_deg: [f64; 6],
+    table_z_mm: f64,
+    calibration: Calibration,
+    chain: SerialChain,
+}
+
+fn fr5() -> Arm {
+    let env = GraspEnv::new(GraspConfig::default()).unwrap();
+    let scene = env.scene();
+    let calibration = Calibration::identity(&scene.arm_limits());
+    let state = ArmState::from_scene(scene);
+    Arm {
+        home_deg: calibration.to_robot(&state.q),
+        table_z_mm: state.table_z * 1000.0,
+        chain: SerialChain::new(&scene.robot().model, "tcp").unwrap(),
+        calibration,
+    }
+}
+
+fn filter(arm: &Arm, config: &SafetyConfig) -> SafetyFilter {
+    let fk = tcp_forward_kinematics(arm.chain.clone(), arm.calibration.clone());
+    SafetyFilter::new(config, &arm.calibration.soft_limits(), arm.table_z_mm, fk).unwrap()
+}
+
+/// A wild value: what a broken policy might emit.
+fn wild(rng: &mut ChaCha8Rng) -> f64 {
+    match rng.random_range(0..6) {
+        0 => f64::NAN,
+        1 => f64::INFINITY,
+        2 => f64::NEG_INFINITY,
+        3 => 1e30,
+        4 => -1e30,
+        _ => rng.random_range(-1e6..1e6),
+    }
+}
+
+#[test]
+fn a_million_random_outputs_never_leave_the_limits_caps_or_box() {
+    let arm = fr5();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let (mut sent, mut faults, mut non_finite) = (0u64, 0u64, 0u64);
+    let mut workspace_faults = 0u64;
+    let mut total = 0u64;
+    while total < 1_000_000 {
+        // A random episode: speed scale, margins and a starting state.
+        let config = SafetyConfig {
+            speed_scale: rng.random_range(0.05..=1.0),
+            joint_margin_deg: rng.random_range(0.0..10.0),
+            max_joint_acc_deg_s2: rng.random_range(100.0..2000.0),
+            ..SafetyConfig::default()
+        };
+        let mut f = filter(&arm, &config);
+        let (lower, upper) = f.joint_limits();
+        let (speed, acc, dt) = f.caps();
+        let (box_min, box_max) = f.workspace();
+        let mut start = arm.home_deg;
+        for v in &mut start {
+            *v += rng.random_range(-25.0..25.0);
+        }
+        if f.start(&start).is_err() {
+            continue;
+        }
+        let (mut last, mut velocity) = (start, [0.0; 6]);
+        for _ in 0..1000 {
+            total += 1;
+            let mut target = [0.0; 6];
+            let kind = rng.random_range(0..10);
+            for (i, t) in target.iter_mut().enumerate() {
+                *t = match kind {
+                    // A broken policy.
+                    0 => {
+                        if rng.random_bool(0.3) {
+                            wild(&mut rng)
+                        } else {
+                            last[i]
+                        }
+                    }
+                    // Anywhere, limits or not.
+                    1..=3 => rng.random_range(-400.0..400.0),
+                    // A policy's small steps.
+                    _ => last[i] + rng.random_range(-5.0..5.0),
+                };
+            }
+            let finite = target.iter().all(|v| v.is_finite());
+            match f.next(&target) {
+                Ok(q) => {
+                    assert!(finite, "a non-finite target produced a set point");
+                    sent += 1;
+                    let tcp = f
+                        .tcp_in_box(&q)
+                        .expect("set point with its TCP out of the box");
+                    for k in 0..3 {
+                        assert!(tcp[k] >= box_min[k] - 1e-6 && tcp[k] <= box_max[k] + 1e-6);
+                    }
+                    for i in 0..6 {
+                        assert!(
+                            q[i] >= lower[i] - 1e-9 && q[i] <= upper[i] + 1e-9,
+                            "joint {i} at {} outside [{}, {}]",
+                            q[i],
+                            lower[i],
+                            upper[i]
+                        );
+                        let v = (q[i] - last[i]) / dt;
+                        assert!(
+                            v.abs() <= speed * (1.0 + 1e-9) + 1e-9,
+                            "speed {v} > {speed}"
+                        );
+                        let a = (v - velocity[i]) / dt;
+                        assert!(
+                            a.abs() <= acc * (1.0 + 1e-6) + 1e-6,
+                            "acceleration {a} > {acc}"
+                        );
+                        velocity[i] = v;
+                    }
+                    last = q;
+                }
+                Err(fault) => {
+                    faults += 1;
+                    match fault {
+                        Fault::NonFiniteOutput { .. } => {
+                            assert!(!finite, "a finite target was called non-finite");
+                            non_finite += 1;
+                        }
+                        Fault::WorkspaceExit { .. } => workspace_faults += 1,
+                        other => panic!("unexpected fault {other}"),
+                    }
+                    break;
+                }
+            }
+        }
+    }
+    println!(
+        "{total} outputs: {sent} set points, {faults} stops ({non_finite} non-finite, \
+         {workspace_faults} workspace)"
+    );
+    // The filter must not buy safety by refusing everything: most outputs become set points.
+    assert!(
+        sent as f64 > 0.9 * total as f64,
+        "only {sent} of {total} outputs were sent"
+    );
+    assert!(non_finite > 0);
+}
+
+#[test]
+fn reachable_targets_are_reached_exactly_and_within_the_caps() {
+    let arm = fr5();
+    let config = SafetyConfig {
+        speed_scale: 0.5,
+        ..SafetyConfig::default()
+    };
+    let mut f = filter(&arm, &config);
+    f.start(&arm.home_deg).unwrap();
+    let mut target = arm.home_deg;
+    target[0] += 20.0;
+    target[2] -= 10.0;
+    let (speed, _, dt) = f.caps();
+    // 20 deg at 90 deg/s takes ~0.22 s plus ramps: well within 200 periods (1.6 s).
+    let mut q = arm.home_deg;
+    for _ in 0..200 {
+        q = f.next(&target).unwrap();
+    }
+    for i in 0..6 {
+        assert!(
+            (q[i] - target[i]).abs() < 1e-9,
+            "joint {i}: {} vs {}",
+            q[i],
+            target[i]
+        );
+    }
+    // It did not get there at once.
+    let mut f = filter(&arm, &config);
+    f.start(&arm.home_deg).unwrap();
+    let first = f.next(&target).unwrap();
+    assert!((first[0] - arm.home_deg[0]).abs() <= speed * dt + 1e-9);
+    assert!(first[0] > arm.home_deg[0]);
+}
+
+#[test]
+fn a_target_beyond_the_soft_limit_stops_at_the_margin() {
+    let arm = fr5();
+    let config = SafetyConfig {
+        speed_scale: 1.0,
+        joint_margin_deg: 5.0,
+        ..SafetyConfig::default()
+    };
+    let mut f = filter(&arm, &config);
+    f.start(&arm.home_deg).unwrap();
+    let (_, upper) = f.joint_limits();
+    let mut target = arm.home_deg;
+    target[5] = 1e30;
+    let mut q = arm.home_deg;
+    for _ in 0..2000 {
+        q = f.next(&target).unwrap();
+    }
+    assert!((q[5] - upper[5]).abs() < 1e-6, "{} vs {}", q[5], upper[5]);
+    assert!(upper[5] <= arm.calibration.joints[5].max_deg - 5.0 + 1e-9);
+}
+
+#[test]
+fn the_tcp_never_goes_below_the_table_plus_margin() {
+    let arm = fr5();
+    let config = SafetyConfig {
+        speed_scale: 1.0,
+        table_margin_mm: 30.0,
+        ..SafetyConfig::default()
+    };
+    let mut f = filter(&arm, &config);
+    f.start(&arm.home_deg).unwrap();
+    // Drive the shoulder and elbow down hard, towards the table.
+    let mut target = arm.home_deg;
+    target[1] -= 60.0;
+    target[2] += 60.0;
+    let floor = f.workspace().0[2];
+    assert!((floor - (arm.table_z_mm + 30.0)).abs() < 1e-9);
+    let mut lowest = f64::INFINITY;
+    for _ in 0..1000 {
+        match f.next(&target) {
+            Ok(q) => lowest = lowest.min(f.tcp_in_box(&q).unwrap()[2]),
+            Err(Fault::WorkspaceExit { .. }) => break,
+            Err(other) => panic!("{other}"),
+        }
+    }
+    assert!(lowest >= floor - 1e-6, "{lowest} < {floor}");
+}
+
+#[test]
+fn starting_outside_the_limits_or_with_nan_is_refused() {
+    let arm = fr5();
+    let mut f = filter(&arm, &SafetyConfig::default());
+    let mut bad = arm.home_deg;
+    bad[0] = 1000.0;
+    assert!(matches!(f.start(&bad), Err(Fault::UnsafeStart(_))));
+    bad[0] = f64::NAN;
+    assert!(matches!(f.start(&bad), Err(Fault::UnsafeStart(_))));
+    // Not started: nothing is sent.
+    assert!(f.next(&arm.home_deg).is_err());
+}
