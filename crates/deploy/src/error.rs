@@ -27,6 +27,8 @@ pub enum DeployError {
     #[error(transparent)]
     Io(#[from] std::io::Error),
     #[error(transparent)]
+    Sim(#[from] fairgrasp_sim::SimError),
+    #[error(transparent)]
     Env(#[from] fairgrasp_env::EnvError),
     #[error(transparent)]
     Rl(#[from] fairgrasp_rl::error::RlError),

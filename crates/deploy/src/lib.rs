@@ -17,6 +17,7 @@ pub mod error;
 pub mod kinematics;
 pub mod pose_source;
 pub mod robot;
+pub mod runner;
 pub mod safety;
 
 pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};

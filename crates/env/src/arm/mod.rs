@@ -176,6 +176,16 @@ impl<T: Task> ArmEnv<T> {
         self.episode.as_ref().map(|e| &e.state)
     }
 
+    /// The observation for a state read outside the simulator (the deployment loop), with the
+    /// previous action normalised as in [`Env::step`] (each value divided by its action-space
+    /// bound). No observation noise is added.
+    pub fn observation_of(&self, state: &ArmState, previous_action: &[f32]) -> Vec<f32> {
+        let mut obs = Vec::with_capacity(self.observation_space.dim());
+        self.task
+            .observe(state, previous_action, &mut ObsWriter::new(&mut obs));
+        obs
+    }
+
     /// What the arm is currently commanded to do.
     pub fn command(&self) -> Option<&Command> {
         self.episode.as_ref().map(|e| &e.command)

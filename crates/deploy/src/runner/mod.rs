@@ -1,0 +1,364 @@
+//! The deployment loop: the policy at its trained control rate, streaming ServoJ at the
+//! controller's servo period through the safety layer.
+//!
+//! Each control step: read the newest state (the [`Watchdog`] judges it) and the object's
+//! pose, build the policy's observation with the model's own code ([`ModelIo`]), act, map the
+//! action to joint targets as in training, then interpolate to them over the step's servo
+//! periods, each set point through the [`SafetyFilter`]. Any fault — stale or failed state,
+//! controller fault code, e-stop, safety stop, a failed call, a non-finite output, a workspace
+//! exit, Ctrl-C — stops the arm (StopMotion, ServoMoveEnd) at once and ends the run with that
+//! fault; nothing moves the arm afterwards ([`GuardedLink`]).
+
+mod estimate;
+mod guard;
+mod log;
+mod model_io;
+
+pub use estimate::StateEstimator;
+pub use guard::{GuardedLink, describe};
+pub use log::JsonLog;
+pub use model_io::ModelIo;
+
+use crate::calibration::Calibration;
+use crate::error::{DeployError, Result};
+use crate::kinematics::tcp_forward_kinematics;
+use crate::pose_source::PoseSource;
+use crate::robot::{RobotCommand, RobotLink};
+use crate::safety::{Fault, SafetyConfig, SafetyFilter, Watchdog};
+use fairgrasp_rl::policies::Policy;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// How the loop runs.
+#[derive(Clone, Debug)]
+pub struct DeployOptions {
+    /// Send commands (false: a dry run that prints them).
+    pub live: bool,
+    pub episodes: u32,
+    /// Control steps per episode (default: the model's episode length).
+    pub max_steps: Option<u32>,
+    pub safety: SafetyConfig,
+    /// The gripper's index on the controller (1–8).
+    pub gripper_index: u8,
+    /// How long to wait for the first object pose of an episode.
+    pub pose_timeout: Duration,
+}
+
+impl Default for DeployOptions {
+    fn default() -> Self {
+        Self {
+            live: false,
+            episodes: 1,
+            max_steps: None,
+            safety: SafetyConfig::default(),
+            gripper_index: 1,
+            pose_timeout: Duration::from_secs(2),
+        }
+    }
+}
+
+/// Prepares each episode and, where it can, judges it.
+pub trait EpisodeHost {
+    /// Gets episode `index` ready: the twin places a new object; at a real robot the operator
+    /// is asked to.
+    fn begin(&mut self, index: u32) -> Result<()>;
+    /// Whether the grasp succeeded, when the host can tell (the twin, by the task's rule).
+    fn outcome(&mut self) -> Result<Option<bool>>;
+}
+
+/// An episode's outcome.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EpisodeReport {
+    pub steps: u32,
+    /// The host's judgement, if it gives one.
+    pub success: Option<bool>,
+    /// Control steps whose Cartesian target had no inverse kinematics.
+    pub ik_failures: u32,
+}
+
+/// How a run ended.
+#[derive(Debug)]
+pub struct RunReport {
+    pub episodes: Vec<EpisodeReport>,
+    /// The fault that stopped the arm, if one did.
+    pub fault: Option<Fault>,
+}
+
+/// Everything the loop works with.
+pub struct Deployment {
+    link: GuardedLink,
+    policy: Policy,
+    io: ModelIo,
+    calibration: Calibration,
+    filter: SafetyFilter,
+    watchdog: Watchdog,
+    options: DeployOptions,
+    interrupt: Arc<AtomicBool>,
+    servo_ticks: u32,
+}
+
+impl Deployment {
+    /// Checks the model, calibration and safety settings against each other.
+    pub fn new(
+        link: Box<dyn RobotLink>,
+        policy: Policy,
+        calibration: Calibration,
+        options: DeployOptions,
+        log: JsonLog,
+        interrupt: Arc<AtomicBool>,
+    ) -> Result<Self> {
+        calibration.validate()?;
+        options.safety.validate()?;
+        if options.episodes == 0 {
+            return Err(DeployError::config("--episodes", "must be at least 1"));
+        }
+        let io = ModelIo::for_policy(&policy)?;
+        let fk = tcp_forward_kinematics(io.chain.clone(), calibration.clone());
+        let filter = SafetyFilter::new(
+            &options.safety,
+            &calibration.soft_limits(),
+            io.nominal.table_z * 1000.0,
+            fk,
+        )?;
+        let servo = options.safety.servo_period_ms / 1000.0;
+        let servo_ticks = ((io.control_period / servo).round() as u32).max(1);
+        let watchdog = Watchdog::new(
+            Duration::from_secs_f64(options.safety.state_deadline_ms / 1000.0),
+            |code| crate::robot::error_code_meaning(code),
+        );
+        Ok(Self {
+            link: GuardedLink::new(link, options.live, log),
+            policy,
+            io,
+            calibration,
+            filter,
+            watchdog,
+            options,
+            interrupt,
+            servo_ticks,
+        })
+    }
+
+    /// Servo periods per control step (the control period over 8 ms, rounded).
+    pub fn servo_ticks(&self) -> u32 {
+        self.servo_ticks
+    }
+
+    /// The home pose in robot degrees.
+    pub fn home_deg(&self) -> [f64; 6] {
+        self.calibration.to_robot(&self.io.nominal.q)
+    }
+
+    /// Runs every episode; a fault stops the arm and ends the run (see [`RunReport::fault`]).
+    pub fn run(
+        &mut self,
+        host: &mut dyn EpisodeHost,
+        pose: &mut dyn PoseSource,
+    ) -> Result<RunReport> {
+        let mut episodes = Vec::new();
+        let fault = match self.prepare() {
+            Err(fault) => Some(fault),
+            Ok(()) => loop {
+                if episodes.len() as u32 == self.options.episodes {
+                    break None;
+                }
+                let index = episodes.len() as u32;
+                host.begin(index)?;
+                match self.episode(index, pose) {
+                    Ok(mut report) => {
+                        report.success = host.outcome()?;
+                        let verdict = match report.success {
+                            Some(true) => "grasped",
+                            Some(false) => "failed",
+                            None => "done",
+                        };
+                        println!(
+                            "episode {}: {verdict} after {} steps",
+                            index + 1,
+                            report.steps
+                        );
+                        self.link
+                            .log
+                            .note("episode", serde_json::json!(format!("{report:?}")));
+                        episodes.push(report);
+                    }
+                    Err(fault) => break Some(fault),
+                }
+            },
+        };
+        if let Some(f) = &fault {
+            self.link.stop(f);
+        }
+        self.link.log.flush();
+        Ok(RunReport { episodes, fault })
+    }
+
+    /// Enables the arm in automatic mode and activates the gripper when needed.
+    fn prepare(&mut self) -> std::result::Result<(), Fault> {
+        let state = self.checked_state()?;
+        if !state.state.enabled {
+            self.link
+                .send(&RobotCommand::RobotEnable { enable: true })?;
+        }
+        if state.state.robot_mode != 0 {
+            self.link.send(&RobotCommand::Mode { mode: 0 })?;
+        }
+        if !state.state.gripper_active {
+            self.link.send(&RobotCommand::ActGripper {
+                index: self.options.gripper_index,
+                activate: true,
+            })?;
+        }
+        Ok(())
+    }
+
+    fn checked_state(&mut self) -> std::result::Result<crate::robot::StampedState, Fault> {
+        if self.interrupt.load(Ordering::Relaxed) {
+            return Err(Fault::Interrupted);
+        }
+        let s = self.link.state()?;
+        self.watchdog.check(&s, Instant::now())?;
+        Ok(s)
+    }
+
+    fn gripper(&mut self, open: bool) -> std::result::Result<(), Fault> {
+        self.link.send(&RobotCommand::MoveGripper {
+            index: self.options.gripper_index,
+            position_percent: if open { 100 } else { 0 },
+            speed_percent: 100,
+            force_percent: 50,
+            max_time_ms: 3000,
+        })
+    }
+
+    /// MoveJ to the model's home pose, checked against the limits and the box first.
+    fn go_home(&mut self) -> std::result::Result<(), Fault> {
+        let home = self.home_deg();
+        let (lower, upper) = self.filter.joint_limits();
+        if (0..6).any(|i| home[i] < lower[i] || home[i] > upper[i])
+            || self.filter.tcp_in_box(&home).is_none()
+        {
+            return Err(Fault::UnsafeStart(format!(
+                "the model's home pose {home:.1?} deg lies outside the soft limits or the \
+                 workspace box; check the calibration"
+            )));
+        }
+        let speed_percent = (100.0 * self.options.safety.speed_scale).clamp(1.0, 100.0);
+        self.link.send(&RobotCommand::MoveJ {
+            joints_deg: home,
+            speed_percent,
+        })
+    }
+
+    /// One episode from home: returns when its steps are done, or the fault.
+    fn episode(
+        &mut self,
+        index: u32,
+        pose: &mut dyn PoseSource,
+    ) -> std::result::Result<EpisodeReport, Fault> {
+        self.go_home()?;
+        self.gripper(true)?;
+        let first = pose
+            .wait_first(self.options.pose_timeout)
+            .map_err(|e| Fault::StreamFailed(format!("object pose: {e}")))?;
+        let mut object = first.message;
+        let start = self.checked_state()?;
+        self.filter.start(&start.state.joints_deg)?;
+        self.link.send(&RobotCommand::ServoMoveStart)?;
+
+        let mut estimator = StateEstimator::new();
+        let mut closing = false;
+        let now = Instant::now();
+        let state = estimator.estimate(
+            &self.io,
+            &self.calibration,
+            &start.state,
+            &object,
+            closing,
+            now,
+        );
+        let mut command = self.io.hold(&state);
+        let mut shown = vec![0.0; self.policy.act_dim()];
+        let mut from = start.state.joints_deg;
+        let servo = Duration::from_secs_f64(self.options.safety.servo_period_ms / 1000.0);
+        let cmd_t = self.options.safety.servo_period_ms / 1000.0;
+        let steps = self.options.max_steps.unwrap_or(self.io.max_steps);
+        let mut ik_failures = 0;
+        let mut deadline = Instant::now();
+        for step in 0..steps {
+            let reading = self.checked_state()?;
+            if let Some(p) = pose
+                .latest()
+                .map_err(|e| Fault::StreamFailed(format!("object pose: {e}")))?
+            {
+                object = p.message;
+            }
+            let state = estimator.estimate(
+                &self.io,
+                &self.calibration,
+                &reading.state,
+                &object,
+                closing,
+                Instant::now(),
+            );
+            let obs = self.io.observe(&state, &shown);
+            let output = self.policy.act(&obs, true).map_err(|e| Fault::CallFailed {
+                call: "policy".into(),
+                message: e.to_string(),
+            })?;
+            if let Some(i) = output.iter().position(|v| !v.is_finite()) {
+                return Err(Fault::NonFiniteOutput {
+                    index: i,
+                    value: output[i],
+                });
+            }
+            self.link.log.step(index, step, &obs, &output);
+            let (action, next_shown) =
+                self.io.env_action(&output).map_err(|e| Fault::CallFailed {
+                    call: "policy action".into(),
+                    message: e.to_string(),
+                })?;
+            shown = next_shown;
+            if !self.io.apply(&state, &action, &mut command) {
+                ik_failures += 1;
+            }
+            if closing == command.gripper_open {
+                closing = !command.gripper_open;
+                self.gripper(command.gripper_open)?;
+            }
+            let target = self.calibration.to_robot(&command.arm_target);
+            for k in 1..=self.servo_ticks {
+                let f = k as f64 / self.servo_ticks as f64;
+                let mut point = [0.0; 6];
+                for i in 0..6 {
+                    point[i] = from[i] + (target[i] - from[i]) * f;
+                }
+                if k > 1 {
+                    self.checked_state()?;
+                }
+                let set_point = self.filter.next(&point)?;
+                self.link.send(&RobotCommand::ServoJ {
+                    joints_deg: set_point,
+                    cmd_t,
+                })?;
+                deadline += servo;
+                let now = Instant::now();
+                if deadline > now {
+                    std::thread::sleep(deadline - now);
+                } else {
+                    // Late (a slow call): do not try to catch up with a burst.
+                    deadline = now;
+                }
+            }
+            from = target;
+        }
+        self.link.send(&RobotCommand::ServoMoveEnd)?;
+        self.gripper(true)?;
+        Ok(EpisodeReport {
+            steps,
+            success: None,
+            ik_failures,
+        })
+    }
+}

@@ -1,0 +1,274 @@
+//! The deployment loop against a stand-in controller whose arm follows every set point at once:
+//! the command sequence, dry runs, and each fault stopping the arm with nothing sent after.
+
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::pose_source::{FixedPose, PoseMessage};
+use fairgrasp_deploy::robot::{RobotCommand, RobotLink, RobotState, StampedState};
+use fairgrasp_deploy::runner::{DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo};
+use fairgrasp_deploy::safety::{Fault, SafetyConfig};
+use fairgrasp_deploy::{DeployError, Result};
+use fairgrasp_rl::policies::Policy;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+fn model_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../rl/tests/data/format1/ppo")
+}
+
+/// What goes wrong, and when (counted in ServoJ calls received).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Trouble {
+    None,
+    EStop,
+    Stale,
+    FaultCode,
+    CallError,
+    NanJoints,
+}
+
+struct Shared {
+    state: RobotState,
+    sequence: u64,
+    received_at: Instant,
+    calls: Vec<(Instant, RobotCommand)>,
+    servo_calls: usize,
+    trouble: Trouble,
+    after: usize,
+    /// When the fault became visible to the loop.
+    fault_at: Option<Instant>,
+}
+
+#[derive(Clone)]
+struct MockRobot(Arc<Mutex<Shared>>);
+
+impl MockRobot {
+    fn new(home: [f64; 6], trouble: Trouble, after: usize) -> Self {
+        Self(Arc::new(Mutex::new(Shared {
+            state: RobotState {
+                joints_deg: home,
+                gripper_active: false,
+                enabled: false,
+                ..RobotState::default()
+            },
+            sequence: 0,
+            received_at: Instant::now(),
+            calls: Vec::new(),
+            servo_calls: 0,
+            trouble,
+            after,
+            fault_at: None,
+        })))
+    }
+
+    fn calls(&self) -> Vec<(Instant, RobotCommand)> {
+        self.0.lock().unwrap().calls.clone()
+    }
+}
+
+impl RobotLink for MockRobot {
+    fn latest_state(&self) -> Result<StampedState> {
+        let mut s = self.0.lock().unwrap();
+        let tripped = s.trouble != Trouble::None && s.servo_calls >= s.after;
+        if tripped && s.fault_at.is_none() {
+            s.fault_at = Some(Instant::now());
+        }
+        match (tripped, s.trouble) {
+            (true, Trouble::EStop) => s.state.emergency_stop = true,
+            (true, Trouble::FaultCode) => (s.state.main_code, s.state.sub_code) = (29, 3),
+            (true, Trouble::NanJoints) => s.state.joints_deg[2] = f64::NAN,
+            _ => {}
+        }
+        if !(tripped && s.trouble == Trouble::Stale) {
+            s.sequence += 1;
+            s.received_at = Instant::now();
+        }
+        Ok(StampedState {
+            state: s.state.clone(),
+            received_at: s.received_at,
+            sequence: s.sequence,
+        })
+    }
+
+    fn send(&mut self, command: &RobotCommand) -> Result<()> {
+        let mut s = self.0.lock().unwrap();
+        s.calls.push((Instant::now(), command.clone()));
+        match command {
+            RobotCommand::ServoJ { joints_deg, .. } => {
+                s.servo_calls += 1;
+                if s.trouble == Trouble::CallError && s.servo_calls > s.after {
+                    if s.fault_at.is_none() {
+                        s.fault_at = Some(Instant::now());
+                    }
+                    return Err(DeployError::Network {
+                        call: "ServoJ".into(),
+                        addr: "mock".into(),
+                        message: "timed out after 200 ms".into(),
+                    });
+                }
+                s.state.joints_deg = *joints_deg;
+            }
+            RobotCommand::MoveJ { joints_deg, .. } => s.state.joints_deg = *joints_deg,
+            RobotCommand::MoveGripper {
+                position_percent, ..
+            } => s.state.gripper_position = *position_percent,
+            RobotCommand::RobotEnable { enable } => s.state.enabled = *enable,
+            RobotCommand::ActGripper { activate, .. } => s.state.gripper_active = *activate,
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+struct Counting(u32);
+
+impl EpisodeHost for Counting {
+    fn begin(&mut self, _: u32) -> Result<()> {
+        self.0 += 1;
+        Ok(())
+    }
+    fn outcome(&mut self) -> Result<Option<bool>> {
+        Ok(None)
+    }
+}
+
+fn deployment(robot: &MockRobot, live: bool, steps: u32) -> (Deployment, Arc<AtomicBool>) {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let calibration = Calibration::identity(&io.limits_rad);
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let options = DeployOptions {
+        live,
+        episodes: 2,
+        max_steps: Some(steps),
+        safety: SafetyConfig {
+            speed_scale: 1.0,
+            ..SafetyConfig::default()
+        },
+        ..DeployOptions::default()
+    };
+    let d = Deployment::new(
+        Box::new(robot.clone()),
+        policy,
+        calibration,
+        options,
+        JsonLog::create(None).unwrap(),
+        interrupt.clone(),
+    )
+    .unwrap();
+    (d, interrupt)
+}
+
+fn home() -> [f64; 6] {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    Calibration::identity(&io.limits_rad).to_robot(&io.nominal.q)
+}
+
+fn cube() -> FixedPose {
+    FixedPose(PoseMessage {
+        position: [0.45, 0.02, 0.0225],
+        orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
+        stamp: None,
+    })
+}
+
+#[test]
+fn a_live_run_enables_homes_and_streams_servo_set_points() {
+    let robot = MockRobot::new(home(), Trouble::None, 0);
+    let (mut d, _) = deployment(&robot, true, 6);
+    let ticks = d.servo_ticks() as usize;
+    assert_eq!(ticks, 4, "1/30 s control over 8 ms servo periods");
+    let mut host = Counting(0);
+    let report = d.run(&mut host, &mut cube()).unwrap();
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    assert_eq!(report.episodes.len(), 2);
+    assert_eq!(host.0, 2);
+    let names: Vec<&str> = robot.calls().iter().map(|(_, c)| c.method()).collect();
+    assert_eq!(&names[..3], ["RobotEnable", "ActGripper", "MoveJ"]);
+    let first_episode: Vec<&str> = names[2..]
+        .iter()
+        .copied()
+        .take_while(|n| *n != "ServoMoveEnd")
+        .collect();
+    assert_eq!(
+        first_episode[..3],
+        ["MoveJ", "MoveGripper", "ServoMoveStart"]
+    );
+    let servos = first_episode.iter().filter(|n| **n == "ServoJ").count();
+    assert_eq!(servos, 6 * ticks);
+    assert_eq!(names.iter().filter(|n| **n == "ServoMoveEnd").count(), 2);
+}
+
+#[test]
+fn a_dry_run_sends_nothing() {
+    let robot = MockRobot::new(home(), Trouble::None, 0);
+    let (mut d, _) = deployment(&robot, false, 3);
+    let report = d.run(&mut Counting(0), &mut cube()).unwrap();
+    assert!(report.fault.is_none());
+    assert!(robot.calls().is_empty(), "{:?}", robot.calls());
+}
+
+/// Runs until the trouble strikes; returns the fault and checks the stop sequence.
+fn stopped_by(trouble: Trouble) -> Fault {
+    let robot = MockRobot::new(home(), trouble, 10);
+    let (mut d, _) = deployment(&robot, true, 50);
+    let report = d.run(&mut Counting(0), &mut cube()).unwrap();
+    let fault = report.fault.expect("the trouble must stop the run");
+    let calls = robot.calls();
+    let n = calls.len();
+    assert!(n >= 2);
+    assert_eq!(calls[n - 2].1, RobotCommand::StopMotion, "{fault}");
+    assert_eq!(calls[n - 1].1, RobotCommand::ServoMoveEnd, "{fault}");
+    let fault_at = robot.0.lock().unwrap().fault_at.expect("fault was seen");
+    let stop_at = calls[n - 2].0;
+    // Stale states are detected after the deadline (50 ms); the rest at once.
+    let allowed = if trouble == Trouble::Stale { 200 } else { 100 };
+    let lag = stop_at.saturating_duration_since(fault_at);
+    assert!(
+        lag < Duration::from_millis(allowed),
+        "{fault}: stopped {lag:?} after the fault"
+    );
+    fault
+}
+
+#[test]
+fn each_fault_stops_the_arm_and_names_itself() {
+    let f = stopped_by(Trouble::EStop);
+    assert_eq!(f, Fault::EmergencyStop);
+    assert!(f.to_string().contains("emergency stop"));
+    let f = stopped_by(Trouble::FaultCode);
+    assert!(
+        matches!(f, Fault::ControllerFault { main_code: 29, .. }),
+        "{f}"
+    );
+    assert!(f.to_string().contains("ServoJ joint over its limit"), "{f}");
+    let f = stopped_by(Trouble::Stale);
+    assert!(matches!(f, Fault::StaleState { .. }), "{f}");
+    let f = stopped_by(Trouble::CallError);
+    assert!(
+        f.to_string().contains("ServoJ") && f.to_string().contains("timed out"),
+        "{f}"
+    );
+    let f = stopped_by(Trouble::NanJoints);
+    assert!(f.to_string().contains("joint 3"), "{f}");
+}
+
+#[test]
+fn ctrl_c_stops_the_arm() {
+    let robot = MockRobot::new(home(), Trouble::None, 0);
+    let (mut d, interrupt) = deployment(&robot, true, 200);
+    let flag = interrupt.clone();
+    let t = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(300));
+        flag.store(true, Ordering::Relaxed);
+    });
+    let report = d.run(&mut Counting(0), &mut cube()).unwrap();
+    t.join().unwrap();
+    assert_eq!(report.fault, Some(Fault::Interrupted));
+    let calls = robot.calls();
+    let n = calls.len();
+    assert_eq!(calls[n - 2].1, RobotCommand::StopMotion);
+    assert_eq!(calls[n - 1].1, RobotCommand::ServoMoveEnd);
+}
