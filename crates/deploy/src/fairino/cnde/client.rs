@@ -309,10 +309,10 @@ struct Receiver {
 
 impl Receiver {
     fn run(&mut self) {
-        if let Err(failure) = self.receive() {
-            if !self.stopping.load(Ordering::SeqCst) {
-                lock(&self.shared).failure.get_or_insert(failure);
-            }
+        if let Err(failure) = self.receive()
+            && !self.stopping.load(Ordering::SeqCst)
+        {
+            lock(&self.shared).failure.get_or_insert(failure);
         }
     }
 

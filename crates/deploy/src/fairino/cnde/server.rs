@@ -206,9 +206,7 @@ impl Connection {
             return End::Close;
         }
         let mut decoder = FrameDecoder::default();
-        let mut config: Option<Output> = None;
-        let mut streaming = false;
-        let mut next_due = Instant::now();
+        let mut session = Session::default();
         let mut count: u8 = 0;
         let mut buf = [0u8; SDK_RECV_SIZE];
         loop {
@@ -219,66 +217,31 @@ impl Connection {
                 return End::Reset;
             }
             let now = Instant::now();
-            if let (true, Some(output)) = (streaming, &config) {
-                if now >= next_due {
-                    if !self.control.stalled.load(Ordering::SeqCst) {
-                        let payload = encode_state_with(&output.layout, &(self.source)());
-                        let frame = Frame::new(count, FrameType::OutputData, payload);
-                        if self.send(&frame).is_err() {
-                            return End::Close;
-                        }
-                        count = count.wrapping_add(1);
+            if let Some(output) = session.due(now) {
+                if !self.control.stalled.load(Ordering::SeqCst) {
+                    let payload = encode_state_with(&output.layout, &(self.source)());
+                    let frame = Frame::new(count, FrameType::OutputData, payload);
+                    if self.send(&frame).is_err() {
+                        return End::Close;
                     }
-                    next_due += output.period;
-                    if next_due < now {
-                        // Fell a whole period behind (a stalled machine): do not burst.
-                        next_due = now + output.period;
-                    }
-                    continue;
+                    count = count.wrapping_add(1);
                 }
+                continue;
             }
-            let wait = if streaming {
-                next_due.saturating_duration_since(now).min(IDLE_POLL)
-            } else {
-                IDLE_POLL
-            };
+            // Sleep in the socket until the next frame is due or a request comes.
             // Zero would mean "block forever" to the socket.
-            let wait = wait.max(Duration::from_micros(50));
+            let wait = session.wait(now).max(Duration::from_micros(50));
             if self.stream.set_read_timeout(Some(wait)).is_err() {
                 return End::Close;
             }
             match self.stream.read(&mut buf) {
                 Ok(0) => return End::Close,
                 Ok(n) => decoder.push(&buf[..n]),
-                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-                    continue;
-                }
-                Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+                Err(e) if is_timeout(&e) || e.kind() == ErrorKind::Interrupted => continue,
                 Err(_) => return End::Close,
             }
             while let Some(request) = decoder.next_frame() {
-                let reply = match request.kind {
-                    FrameType::OutputConfig => match accept_config(&request.payload) {
-                        Ok(output) => {
-                            config = Some(output);
-                            Frame::message_ok(count)
-                        }
-                        Err(text) => Frame::message_error(count, &text),
-                    },
-                    FrameType::OutputStart if config.is_some() => {
-                        if !streaming {
-                            streaming = true;
-                            next_due = Instant::now();
-                        }
-                        Frame::message_ok(count)
-                    }
-                    FrameType::OutputStart => Frame::message_error(count, "NOT_CONFIGURED"),
-                    FrameType::OutputStop => {
-                        streaming = false;
-                        Frame::message_ok(count)
-                    }
-                    other => Frame::message_error(count, &format!("UNSUPPORTED type {other:?}")),
-                };
+                let reply = session.reply(&request, count);
                 if self.send(&reply).is_err() {
                     return End::Close;
                 }
@@ -291,6 +254,71 @@ impl Connection {
     fn send(&mut self, frame: &Frame) -> io::Result<()> {
         let bytes = frame.encode().map_err(io::Error::other)?;
         self.stream.write_all(&bytes)
+    }
+}
+
+fn is_timeout(e: &io::Error) -> bool {
+    matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut)
+}
+
+/// What a client has asked for, and when its next DATA frame is due.
+#[derive(Default)]
+struct Session {
+    config: Option<Output>,
+    /// `Some` while streaming.
+    next_due: Option<Instant>,
+}
+
+impl Session {
+    /// The output to send now, if a frame is due; moves the deadline on by a period
+    /// (from the deadline, not from now, so the period does not drift).
+    fn due(&mut self, now: Instant) -> Option<&Output> {
+        let output = self.config.as_ref()?;
+        let next_due = self.next_due.as_mut()?;
+        if now < *next_due {
+            return None;
+        }
+        *next_due += output.period;
+        if *next_due < now {
+            // A whole period behind (a stalled machine): skip, do not burst.
+            *next_due = now + output.period;
+        }
+        Some(output)
+    }
+
+    /// How long until something is due.
+    fn wait(&self, now: Instant) -> Duration {
+        self.next_due
+            .map_or(IDLE_POLL, |due| due.saturating_duration_since(now))
+            .min(IDLE_POLL)
+    }
+
+    /// The reply to one request.
+    fn reply(&mut self, request: &Frame, count: u8) -> Frame {
+        match request.kind {
+            FrameType::OutputConfig => match accept_config(&request.payload) {
+                Ok(output) => {
+                    self.config = Some(output);
+                    Frame::message_ok(count)
+                }
+                Err(text) => Frame::message_error(count, &text),
+            },
+            FrameType::OutputStart => match &self.config {
+                Some(output) => {
+                    // The first DATA frame comes a period after the reply: sent
+                    // together, the SDK would read both as one frame and drop them.
+                    self.next_due
+                        .get_or_insert_with(|| Instant::now() + output.period);
+                    Frame::message_ok(count)
+                }
+                None => Frame::message_error(count, "NOT_CONFIGURED"),
+            },
+            FrameType::OutputStop => {
+                self.next_due = None;
+                Frame::message_ok(count)
+            }
+            other => Frame::message_error(count, &format!("UNSUPPORTED type {other:?}")),
+        }
     }
 }
 
