@@ -470,7 +470,11 @@ fn our_client_against_our_server() {
         err.contains("the arm is on fire") && err.contains("Fail"),
         "{err}"
     );
-    let err = client.call("Panic", &[]).unwrap_err().to_string();
+    // Printing the panic (and a backtrace, where enabled) can take seconds.
+    let err = client
+        .call_with_timeout("Panic", &[], Duration::from_secs(60))
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("internal error"), "{err}");
     // The server still answers after a panicking handler.
     assert!(client.call("Echo", &[Value::Int(1)]).is_ok());
@@ -923,4 +927,123 @@ fn connect_fails_cleanly_without_a_controller() {
     let err = FairinoClient::connect("127.0.0.1", &config).err().unwrap();
     assert!(matches!(err, DeployError::Network { .. }), "{err}");
     assert!(FairinoClient::connect("", &config).is_err());
+}
+
+// ---------------------------------------------------------------- CNDE client vs. raw servers
+
+/// A one-connection CNDE server that answers config and start, then hands the socket to
+/// `script`.
+fn scripted_cnde_server(script: impl FnOnce(TcpStream) + Send + 'static) -> String {
+    let listener = TcpListener::bind(loopback()).unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        let (mut stream, _) = listener.accept().unwrap();
+        let mut decoder = FrameDecoder::default();
+        for _ in 0..2 {
+            read_one(&mut stream, &mut decoder, |_| true);
+            stream
+                .write_all(&Frame::message_ok(0).encode().unwrap())
+                .unwrap();
+        }
+        script(stream);
+    });
+    addr
+}
+
+fn data_frame(j1: f64) -> Vec<u8> {
+    let state = RobotState {
+        joints_deg: [j1, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ..RobotState::default()
+    };
+    Frame::new(
+        0,
+        FrameType::OutputData,
+        encode_state(&default_state_names(), &state),
+    )
+    .encode()
+    .unwrap()
+}
+
+#[test]
+fn cnde_client_reassembles_merged_and_split_frames() {
+    let addr = scripted_cnde_server(|mut stream| {
+        let pause = || std::thread::sleep(Duration::from_millis(20));
+        stream.write_all(&data_frame(1.0)).unwrap();
+        pause();
+        // Two frames in one write, then one in three pieces, garbage in between.
+        let mut merged = data_frame(2.0);
+        merged.extend(data_frame(3.0));
+        merged.extend(b"\x00\x01junk\x5A");
+        stream.write_all(&merged).unwrap();
+        pause();
+        let split = data_frame(4.0);
+        for piece in [&split[..5], &split[5..700], &split[700..]] {
+            stream.write_all(piece).unwrap();
+            pause();
+        }
+        std::thread::sleep(Duration::from_secs(3));
+    });
+    let client =
+        CndeClient::connect(&addr, &default_state_names(), 8, Duration::from_secs(2)).unwrap();
+    assert!(eventually(Duration::from_secs(2), || {
+        client.latest().unwrap().state.joints_deg[0] == 4.0
+    }));
+    // 1 + 2 merged + 1 split: every frame decoded, the garbage skipped.
+    assert_eq!(client.latest().unwrap().sequence, 4);
+}
+
+#[test]
+fn cnde_client_fails_on_endless_garbage_and_short_frames() {
+    let addr = scripted_cnde_server(|mut stream| {
+        stream.write_all(&data_frame(1.0)).unwrap();
+        for _ in 0..10 {
+            if stream.write_all(&[0x11; 4096]).is_err() {
+                return;
+            }
+        }
+        std::thread::sleep(Duration::from_secs(3));
+    });
+    let client =
+        CndeClient::connect(&addr, &default_state_names(), 8, Duration::from_secs(2)).unwrap();
+    assert!(eventually(Duration::from_secs(2), || client
+        .latest()
+        .is_err()));
+    let err = client.latest().unwrap_err();
+    assert!(matches!(err, DeployError::Protocol(_)), "{err}");
+    assert!(err.to_string().contains("garbage"), "{err}");
+
+    let addr = scripted_cnde_server(|mut stream| {
+        stream.write_all(&data_frame(1.0)).unwrap();
+        let short = Frame::new(0, FrameType::OutputData, vec![1, 1, 0, 0]);
+        stream.write_all(&short.encode().unwrap()).unwrap();
+        std::thread::sleep(Duration::from_secs(3));
+    });
+    let client =
+        CndeClient::connect(&addr, &default_state_names(), 8, Duration::from_secs(2)).unwrap();
+    assert!(eventually(Duration::from_secs(2), || client
+        .latest()
+        .is_err()));
+    assert!(
+        client
+            .latest()
+            .unwrap_err()
+            .to_string()
+            .contains("4 payload bytes")
+    );
+}
+
+#[test]
+fn cnde_client_times_out_on_a_silent_controller() {
+    let listener = TcpListener::bind(loopback()).unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    // Accepts (the backlog does) but never answers the config.
+    let timeout = Duration::from_millis(200);
+    let start = Instant::now();
+    let err = CndeClient::connect(&addr, &default_state_names(), 8, timeout)
+        .err()
+        .unwrap();
+    assert!(start.elapsed() < timeout * 5, "took {:?}", start.elapsed());
+    assert!(matches!(err, DeployError::Network { .. }), "{err}");
+    assert!(err.to_string().contains("config"), "{err}");
+    drop(listener);
 }

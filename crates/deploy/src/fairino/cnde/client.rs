@@ -51,7 +51,8 @@ fn lock(shared: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
 
 impl CndeClient {
     /// Connects to `addr` ("ip:port"), asks for `names` every `period_ms`, starts the
-    /// stream and waits for the first state. Every step is bounded by `timeout`.
+    /// stream and waits for the first state. The whole handshake is bounded by `timeout`
+    /// (plus two periods for the first state).
     pub fn connect(
         addr: &str,
         names: &[String],
@@ -78,6 +79,7 @@ impl CndeClient {
             .map_err(|e| network(format!("bad address: {e}")))?
             .next()
             .ok_or_else(|| network("the address resolves to nothing".into()))?;
+        let deadline = Instant::now() + timeout;
         let mut stream = TcpStream::connect_timeout(&socket_addr, timeout)
             .map_err(|e| network(format!("connect: {e}")))?;
         stream
@@ -87,7 +89,6 @@ impl CndeClient {
 
         let max_payload = layout.payload_len.max(SDK_RECV_SIZE);
         let mut decoder = FrameDecoder::new(max_payload);
-        let deadline = Instant::now() + timeout;
         let config = Frame::new(
             0,
             FrameType::OutputConfig,
@@ -111,7 +112,7 @@ impl CndeClient {
 
         // Start is acknowledged by a MESSAGE or by the first DATA frame itself.
         let period = Duration::from_millis(period_ms.into());
-        let first_deadline = deadline.max(Instant::now() + timeout) + 2 * period;
+        let first_deadline = deadline + 2 * period;
         let mut state = RobotState::default();
         loop {
             let frame = read_frame(&mut stream, &mut decoder, first_deadline)
