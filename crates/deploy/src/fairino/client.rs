@@ -86,6 +86,7 @@ impl FairinoClient {
         &self.rpc
     }
 
+    /// The configuration it connected with.
     pub fn config(&self) -> &ClientConfig {
         &self.config
     }

@@ -22,6 +22,7 @@ pub const SDK_RECV_SIZE: usize = 4096;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum FrameType {
+    /// Client → controller: configure inputs (unused by the SDK).
     InputConfig = 0,
     /// Client → controller: period and state names.
     OutputConfig = 1,
@@ -31,10 +32,13 @@ pub enum FrameType {
     OutputStop = 3,
     /// Controller → client: one state report.
     OutputData = 4,
+    /// Client → controller: input values (unused by the SDK).
     InputData = 5,
     /// Both ways: a status byte (0 = OK) and an optional text.
     Message = 6,
+    /// Protocol version handshake (unused by the SDK).
     SetVersion = 7,
+    /// Protocol version query (unused by the SDK).
     GetVersion = 8,
 }
 
@@ -61,11 +65,14 @@ impl FrameType {
 pub struct Frame {
     /// The sender's frame counter (wraps at 256; nobody checks it).
     pub count: u8,
+    /// What the frame is.
     pub kind: FrameType,
+    /// The bytes between the header and the tail.
     pub payload: Vec<u8>,
 }
 
 impl Frame {
+    /// A frame of `kind` carrying `payload`.
     pub fn new(count: u8, kind: FrameType, payload: Vec<u8>) -> Self {
         Self {
             count,

@@ -35,6 +35,7 @@ pub struct CndeControl {
 }
 
 impl CndeControl {
+    /// Controls with no fault injected, shared.
     pub fn new() -> Arc<Self> {
         Arc::new(Self::default())
     }
@@ -45,7 +46,7 @@ impl CndeControl {
     }
 
     /// Resets every connection open now (RST, as a controller that drops the link):
-    /// each notices within a period or [`IDLE_POLL`]. Later connections are not affected.
+    /// each notices within a period or 10 ms. Later connections are not affected.
     pub fn reset_all(&self) {
         self.reset_epoch.fetch_add(1, Ordering::SeqCst);
     }

@@ -45,6 +45,7 @@ impl Value {
         }
     }
 
+    /// The truth value in a `Bool`.
     pub fn as_bool(&self) -> Option<bool> {
         match self {
             Value::Bool(b) => Some(*b),
@@ -52,6 +53,7 @@ impl Value {
         }
     }
 
+    /// The text in a `String`.
     pub fn as_str(&self) -> Option<&str> {
         match self {
             Value::String(s) => Some(s),
@@ -59,6 +61,7 @@ impl Value {
         }
     }
 
+    /// The items of an `Array`.
     pub fn as_array(&self) -> Option<&[Value]> {
         match self {
             Value::Array(items) => Some(items),
@@ -123,6 +126,7 @@ pub struct Fault {
 }
 
 impl Fault {
+    /// A fault with its code and text.
     pub fn new(code: i32, message: impl Into<String>) -> Self {
         Self {
             code,
