@@ -14,6 +14,7 @@
 pub mod atomic;
 pub mod calibration;
 pub mod error;
+pub mod fairino;
 pub mod kinematics;
 pub mod pose_source;
 pub mod robot;

@@ -151,24 +151,3 @@ pub trait RobotLink: Send {
     fn send(&mut self, command: &RobotCommand) -> Result<()>;
 }
 
-/// The controller's error codes in words (from the vendor's `robot_error.h`; see
-/// `fairino-controller.md`).
-pub fn error_code_meaning(code: i64) -> &'static str {
-    match code {
-        0 => "no error",
-        -16..=-1 => "client-side SDK or communication error",
-        3 => "wrong number of parameters",
-        4 => "parameter out of range",
-        14 => "execution failed",
-        18 => "a program is running",
-        28 => "inverse kinematics failed",
-        29 => "ServoJ joint over its limit",
-        30 => "not resettable: power-cycle the controller",
-        38 => "singular pose",
-        73 => "gripper motion error",
-        76 => "wait timeout",
-        99 => "safety stop",
-        112 => "pose unreachable",
-        _ => "unknown error code",
-    }
-}

@@ -243,7 +243,7 @@ fn each_fault_stops_the_arm_and_names_itself() {
         matches!(f, Fault::ControllerFault { main_code: 29, .. }),
         "{f}"
     );
-    assert!(f.to_string().contains("ServoJ joint over its limit"), "{f}");
+    assert!(f.to_string().contains("ServoJ joint over limit"), "{f}");
     let f = stopped_by(Trouble::Stale);
     assert!(matches!(f, Fault::StaleState { .. }), "{f}");
     let f = stopped_by(Trouble::CallError);

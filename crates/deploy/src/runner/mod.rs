@@ -125,7 +125,7 @@ impl Deployment {
         let servo_ticks = ((io.control_period / servo).round() as u32).max(1);
         let watchdog = Watchdog::new(
             Duration::from_secs_f64(options.safety.state_deadline_ms / 1000.0),
-            crate::robot::error_code_meaning,
+            crate::fairino::error_codes::error_code_meaning,
         );
         Ok(Self {
             link: GuardedLink::new(link, options.live, log),
