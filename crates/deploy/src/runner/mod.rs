@@ -10,11 +10,13 @@
 //! fault; nothing moves the arm afterwards ([`GuardedLink`]).
 
 mod estimate;
+mod hosts;
 mod guard;
 mod log;
 mod model_io;
 
 pub use estimate::StateEstimator;
+pub use hosts::{OperatorHost, TwinHost};
 pub use guard::{GuardedLink, describe};
 pub use log::JsonLog;
 pub use model_io::ModelIo;
