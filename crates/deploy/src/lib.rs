@@ -14,6 +14,7 @@
 pub mod error;
 pub mod pose_source;
 pub mod robot;
+pub mod twin;
 
 pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};
 
