@@ -12,6 +12,7 @@
 //! - [`export`]: ONNX and safetensors files of a trained policy.
 
 pub mod error;
+pub mod fairino;
 pub mod pose_source;
 pub mod robot;
 pub mod twin;

@@ -1,0 +1,83 @@
+//! Readable meanings of the FAIRINO error codes.
+//!
+//! Negative codes are produced by the vendor SDKs themselves (communication and file
+//! errors; -17…-20 are the Python SDK's CNDE configuration errors), positive ones by the
+//! controller. Facts from `fairino-controller.md` and the vendor's `robot_error.h`.
+
+/// What a FAIRINO error code means, in a few words; `"unknown error code"` for any code
+/// this table does not know.
+pub fn error_code_meaning(code: i64) -> &'static str {
+    match code {
+        0 => "success",
+        -1 => "other SDK error",
+        -2 => "network communication failed",
+        -3 => "XML-RPC communication failed (check the network and the controller's address)",
+        -4 => "XML-RPC call failed, or the SDK is not connected",
+        -5 => "Lua file not found",
+        -6 => "save path not found",
+        -7 => "file to upload not found",
+        -8 => "file download failed",
+        -9 => "file download check failed",
+        -10 => "writing the downloaded file failed",
+        -11 => "bad file name",
+        -12 => "file upload failed",
+        -13 => "file too large",
+        -14 => "opening the file failed",
+        -15 => "socket send failed",
+        -16 => "socket receive failed",
+        -17 => "CNDE state configured twice",
+        -18 => "CNDE state name not found",
+        -19 => "CNDE configuration needs at least one state",
+        -20 => "too many CNDE states configured",
+        3 => "wrong number of parameters",
+        4 => "parameter out of range",
+        8 => "file failed to open",
+        14 => "execution failed",
+        18 => "a program is running",
+        25 => "computation failed",
+        28 => "inverse kinematics failed",
+        29 => "ServoJ joint over limit",
+        30 => "fault cannot be reset: power-cycle the control box",
+        33 => "external axis not at zero: lead and resolution not set",
+        34 => "wrong workpiece number",
+        36 => "file name too long",
+        38 => "singular pose",
+        41 => "external axis not homed",
+        45 => "external axis not active",
+        46 => "external axis needs calibration for synchronised motion",
+        47 => "external drive configuration failed",
+        48 => "reading the external drive configuration timed out",
+        52 => "synchronised motion cannot run single-step",
+        64 => "command not queued",
+        66..=68 => "wrong intermediate point of the circle or spiral",
+        69 => "wrong middle point of the arc",
+        70 => "wrong target point of the arc",
+        73 => "gripper motion error",
+        74 => "wrong target point of the line",
+        75 => "channel error",
+        76 => "wait timed out",
+        82 => "wrong TPD command point",
+        83 => "wrong TPD tool number",
+        94 => "wrong spline point",
+        99 => "safety stop",
+        108 => "wrong spiral start point",
+        112 => "target pose unreachable",
+        130 => "point table not found",
+        _ => "unknown error code",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn known_and_unknown_codes() {
+        assert_eq!(error_code_meaning(14), "execution failed");
+        assert_eq!(error_code_meaning(99), "safety stop");
+        assert_eq!(error_code_meaning(112), "target pose unreachable");
+        assert!(error_code_meaning(-4).contains("not connected"));
+        assert_eq!(error_code_meaning(12345), "unknown error code");
+        assert_eq!(error_code_meaning(-99), "unknown error code");
+    }
+}

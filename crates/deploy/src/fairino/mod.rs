@@ -1,0 +1,16 @@
+//! The FAIRINO controller's remote interface, both sides: XML-RPC on TCP 20003 for
+//! commands and getters, the CNDE state stream on TCP 20005 (see
+//! `fairino-controller.md` and `fairino-cnde.md` in the shared reference).
+//!
+//! - [`xmlrpc`]: XML-RPC values, a client with timeouts and a threaded server.
+//! - [`cnde`]: frames, the state-field table, a streaming server and client.
+//! - [`client::FairinoClient`]: a [`crate::RobotLink`] over both.
+//! - [`error_codes`]: what the controller's error codes mean.
+
+pub mod client;
+pub mod cnde;
+pub mod error_codes;
+pub mod xmlrpc;
+
+pub use client::{ClientConfig, FairinoClient};
+pub use error_codes::error_code_meaning;
