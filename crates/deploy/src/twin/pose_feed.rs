@@ -88,14 +88,14 @@ fn run(
                 clients.push(stream);
             }
         }
-        if let Some(message) = source() {
-            if let Ok(json) = serde_json::to_string(&message) {
-                let line = format!("{json}\n");
-                clients.retain_mut(|c| c.write_all(line.as_bytes()).is_ok());
-                if let Some((socket, target)) = &udp {
-                    // A lost datagram is what UDP means; the next one follows in a period.
-                    let _ = socket.send_to(json.as_bytes(), target);
-                }
+        if let Some(message) = source()
+            && let Ok(json) = serde_json::to_string(&message)
+        {
+            let line = format!("{json}\n");
+            clients.retain_mut(|c| c.write_all(line.as_bytes()).is_ok());
+            if let Some((socket, target)) = &udp {
+                // A lost datagram is what UDP means; the next one follows in a period.
+                let _ = socket.send_to(json.as_bytes(), target);
             }
         }
         next += period;
