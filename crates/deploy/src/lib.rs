@@ -20,6 +20,7 @@ pub mod pose_source;
 pub mod robot;
 pub mod runner;
 pub mod safety;
+pub mod twin;
 
 pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};
 

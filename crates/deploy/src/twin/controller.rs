@@ -1,0 +1,679 @@
+//! The FAIRINO controller's behaviour as a state machine, without any networking: what each
+//! remote call does to the robot and what it answers. The simulation feeds it measurements
+//! ([`Controller::observe`]) and reads its joint and gripper set points
+//! ([`Controller::setpoint`]); the XML-RPC service calls the typed methods. Time is given by the
+//! caller in seconds, so tests can drive it with a perfect plant and no clock.
+//!
+//! # Behaviour
+//! - **Start state** (see [`StartState`]): powered on, drives enabled, automatic mode, global
+//!   speed 100 %, no fault, the gripper *not* activated (a real gripper needs `ActGripper` after
+//!   power-on), arm holding its home pose.
+//! - **Motion gating**, in this order: e-stop pressed → 31; safety stop → 99; a fault in
+//!   `main_code` → 14; drives disabled → 101; manual mode → 14. It applies to `MoveJ`,
+//!   `ServoMoveStart` and `ServoJ`; `MoveGripper` is gated by the e-stop and the safety stop
+//!   only (the gripper is a peripheral).
+//! - **`MoveJ`**: joint targets inside the limits (else 4), `vel` and `ovl` in (0, 100] % (else
+//!   4), scaled by `SetSpeed`'s global %, a synchronised minimum-jerk move within the FR5's joint
+//!   speed and acceleration limits. Moves queue behind each other; each gets a ticket whose
+//!   outcome (0 arrived, or the code of what stopped it) the caller can wait for. It is done when
+//!   the profile has ended and the arm has settled (joints within 2° of the target and slower
+//!   than 1°/s), or [`ControllerConfig::settle_timeout`] after the profile's end. Refused with 14
+//!   during a servo session.
+//! - **Servo**: `ServoJ` outside a `ServoMoveStart`…`ServoMoveEnd` session → 14; `cmdT` outside
+//!   0.001…0.016 s → 4; a target beyond the joint limits → 29 and nothing moves. Each accepted
+//!   target is reached along a straight line over `cmdT`, the set point never faster than the
+//!   joint's maximum speed.
+//! - **`StopMotion`** aborts every move (a waiting `MoveJ` returns 14) and the servo session;
+//!   the arm holds its current set point. A fault, the e-stop (31), a safety stop (99),
+//!   disabling (101) or manual mode (14) abort the same way, with their code.
+//! - **Faults**: `main_code`/`sub_code` of the state. The e-stop sets main code 31, sub code 1
+//!   ([`MAIN_CODE_EMERGENCY_STOP`]), which `ResetAllError` clears once the button is released
+//!   (while pressed: 14). An injected fault is resettable unless injected otherwise (then 30).
+//!   Safety stops show in their own flags, not in `main_code`.
+//! - **Gripper**: `ActGripper(index 1…8, 1)` activates, `(…, 0)` resets; `MoveGripper` before
+//!   activation → 73; position, speed and force in 0…100 % (else 4); `maxtime` 0…30000 ms (0:
+//!   30 s). Speed and force are accepted and not modelled (the simulated fingers have their own).
+//!   Motion done on arrival, on a stall (an object between the fingers) or after `maxtime`.
+//! - **Kinematics**: the simulator's chain from the arm base to the gripper's centre point (the
+//!   TCP as if the gripper were configured as the tool). Poses are `[x, y, z, rx, ry, rz]` in mm
+//!   and degrees, base frame, `R = Rz(rz)·Ry(ry)·Rx(rx)` (fixed X-Y-Z angles). IK failure → 28.
+
+use super::gripper::Gripper;
+use super::motion::{Joints, Profile, ServoStep, max_gap, rate_limited};
+use crate::robot::RobotState;
+use fairgrasp_sim::kinematics::SerialChain;
+use fairgrasp_sim::rapier3d::na::{Isometry3, Translation3, UnitQuaternion};
+use std::collections::VecDeque;
+
+/// Return codes of the controller (numbers from the vendor's `robot_error.h`).
+pub mod codes {
+    pub const OK: i32 = 0;
+    pub const PARAM_COUNT: i32 = 3;
+    pub const PARAM_VALUE: i32 = 4;
+    pub const EXECUTION_FAILED: i32 = 14;
+    pub const IK_FAILED: i32 = 28;
+    pub const SERVOJ_OVER_LIMIT: i32 = 29;
+    pub const NOT_RESETTABLE: i32 = 30;
+    pub const EMERGENCY_STOP: i32 = 31;
+    pub const GRIPPER_MOTION: i32 = 73;
+    pub const WAIT_TIMEOUT: i32 = 76;
+    pub const SAFETY_STOP: i32 = 99;
+    pub const NOT_ENABLED: i32 = 101;
+}
+
+/// `(main_code, sub_code)` while the e-stop is pressed, and after until reset.
+pub const MAIN_CODE_EMERGENCY_STOP: (i32, i32) = (31, 1);
+
+/// The FR5's joint speed limits (deg/s): 3.15 rad/s for j1–j3, 3.2 rad/s for j4–j6.
+pub const FR5_MAX_SPEED_DEG: Joints = [180.48, 180.48, 180.48, 183.35, 183.35, 183.35];
+/// Joint acceleration at 100 % (deg/s²): the twin's choice, full speed in half a second.
+pub const FR5_MAX_ACC_DEG: Joints = [360.0, 360.0, 360.0, 366.0, 366.0, 366.0];
+
+/// How the controller is found at power-on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StartState {
+    pub enabled: bool,
+    /// Automatic mode (remote motion allowed); manual otherwise.
+    pub automatic: bool,
+    pub gripper_active: bool,
+}
+
+impl Default for StartState {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            automatic: true,
+            gripper_active: false,
+        }
+    }
+}
+
+/// Limits and timing of the controller.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControllerConfig {
+    /// Joint limits (deg).
+    pub limits_deg: [(f64, f64); 6],
+    pub max_speed_deg: Joints,
+    pub max_acc_deg: Joints,
+    /// A move counts as done this long after its profile ended, settled or not (s).
+    pub settle_timeout: f64,
+    pub start: StartState,
+}
+
+impl ControllerConfig {
+    /// The FR5's speeds with joint limits `limits_rad` (from the robot model).
+    pub fn fr5(limits_rad: &[(f64, f64)], start: StartState) -> Self {
+        Self {
+            limits_deg: std::array::from_fn(|j| {
+                let (lo, hi) = limits_rad.get(j).copied().unwrap_or((-3.05, 3.05));
+                (lo.to_degrees(), hi.to_degrees())
+            }),
+            max_speed_deg: FR5_MAX_SPEED_DEG,
+            max_acc_deg: FR5_MAX_ACC_DEG,
+            settle_timeout: 1.0,
+            start,
+        }
+    }
+}
+
+/// What the simulation measured.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Measured {
+    pub joints_deg: Joints,
+    pub joint_speeds_deg: Joints,
+    /// Gripper opening, % of the stroke.
+    pub gripper_percent: f64,
+}
+
+/// What the simulation should track.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Setpoint {
+    pub joints_deg: Joints,
+    pub gripper_percent: f64,
+}
+
+#[derive(Clone, Debug)]
+struct Fault {
+    main: i32,
+    sub: i32,
+    resettable: bool,
+}
+
+#[derive(Clone, Debug)]
+struct QueuedMove {
+    ticket: u64,
+    target: Joints,
+    scale: f64,
+}
+
+#[derive(Clone, Debug)]
+struct ActiveMove {
+    ticket: u64,
+    profile: Profile,
+}
+
+/// Outcomes kept for waiting callers; older ones are forgotten.
+const OUTCOMES_KEPT: usize = 256;
+
+/// The controller (see the [module](self) documentation).
+#[derive(Clone, Debug)]
+pub struct Controller {
+    config: ControllerConfig,
+    chain: SerialChain,
+    enabled: bool,
+    automatic: bool,
+    speed_percent: f64,
+    estop: bool,
+    safety: [bool; 2],
+    fault: Option<Fault>,
+    setpoint: Joints,
+    setpoint_time: f64,
+    active: Option<ActiveMove>,
+    queue: VecDeque<QueuedMove>,
+    servo_session: bool,
+    servo_step: Option<ServoStep>,
+    next_ticket: u64,
+    outcomes: VecDeque<(u64, i32)>,
+    measured: Measured,
+    gripper: Gripper,
+    motion_commands: u64,
+}
+
+/// A TCP pose as the controller reports it: mm and degrees, fixed X-Y-Z angles.
+pub fn pose_to_wire(pose: &Isometry3<f64>) -> [f64; 6] {
+    let t = pose.translation.vector * 1000.0;
+    let (rx, ry, rz) = pose.rotation.euler_angles();
+    [
+        t.x,
+        t.y,
+        t.z,
+        rx.to_degrees(),
+        ry.to_degrees(),
+        rz.to_degrees(),
+    ]
+}
+
+/// The inverse of [`pose_to_wire`].
+pub fn wire_to_pose(p: &[f64; 6]) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(p[0] / 1000.0, p[1] / 1000.0, p[2] / 1000.0),
+        UnitQuaternion::from_euler_angles(p[3].to_radians(), p[4].to_radians(), p[5].to_radians()),
+    )
+}
+
+fn finite(values: &[f64]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+impl Controller {
+    /// A controller at power-on, holding `home_deg`. `chain` goes from the arm base to the TCP.
+    pub fn new(config: ControllerConfig, chain: SerialChain, home_deg: Joints, now: f64) -> Self {
+        let start = config.start.clone();
+        Self {
+            config,
+            chain,
+            enabled: start.enabled,
+            automatic: start.automatic,
+            speed_percent: 100.0,
+            estop: false,
+            safety: [false; 2],
+            fault: None,
+            setpoint: home_deg,
+            setpoint_time: now,
+            active: None,
+            queue: VecDeque::new(),
+            servo_session: false,
+            servo_step: None,
+            next_ticket: 1,
+            outcomes: VecDeque::new(),
+            measured: Measured {
+                joints_deg: home_deg,
+                joint_speeds_deg: [0.0; 6],
+                gripper_percent: 100.0,
+            },
+            gripper: Gripper::new(start.gripper_active),
+            motion_commands: 0,
+        }
+    }
+
+    pub fn config(&self) -> &ControllerConfig {
+        &self.config
+    }
+
+    // ── Gating and aborting ────────────────────────────────────────────────
+
+    /// Why arm motion is refused now, if it is.
+    pub fn motion_refusal(&self) -> Option<i32> {
+        if self.estop {
+            Some(codes::EMERGENCY_STOP)
+        } else if self.safety.iter().any(|&s| s) {
+            Some(codes::SAFETY_STOP)
+        } else if self.fault.is_some() {
+            Some(codes::EXECUTION_FAILED)
+        } else if !self.enabled {
+            Some(codes::NOT_ENABLED)
+        } else if !self.automatic {
+            Some(codes::EXECUTION_FAILED)
+        } else {
+            None
+        }
+    }
+
+    fn record(&mut self, ticket: u64, code: i32) {
+        if self.outcomes.len() >= OUTCOMES_KEPT {
+            self.outcomes.pop_front();
+        }
+        self.outcomes.push_back((ticket, code));
+    }
+
+    /// Stops every motion where the set point is now; waiting moves end with `code`.
+    fn abort(&mut self, now: f64, code: i32) {
+        self.advance(now);
+        if let Some(active) = self.active.take() {
+            self.record(active.ticket, code);
+        }
+        while let Some(queued) = self.queue.pop_front() {
+            self.record(queued.ticket, code);
+        }
+        self.servo_session = false;
+        self.servo_step = None;
+    }
+
+    /// The outcome of move `ticket`: `None` while it is queued or moving; a code once it ended
+    /// (also for tickets too old to remember: [`codes::OK`]).
+    pub fn outcome(&self, ticket: u64) -> Option<i32> {
+        if let Some((_, code)) = self.outcomes.iter().rev().find(|(t, _)| *t == ticket) {
+            return Some(*code);
+        }
+        let pending = self.active.as_ref().is_some_and(|a| a.ticket == ticket)
+            || self.queue.iter().any(|q| q.ticket == ticket);
+        (!pending).then_some(codes::OK)
+    }
+
+    // ── Power, mode, speed, faults ─────────────────────────────────────────
+
+    /// `RobotEnable(1|0)`.
+    pub fn enable(&mut self, now: f64, on: bool) -> i32 {
+        if on && self.estop {
+            return codes::EMERGENCY_STOP;
+        }
+        if !on {
+            self.abort(now, codes::NOT_ENABLED);
+        }
+        self.enabled = on;
+        codes::OK
+    }
+
+    /// `Mode(0 automatic | 1 manual)`.
+    pub fn set_mode(&mut self, now: f64, mode: i64) -> i32 {
+        match mode {
+            0 => self.automatic = true,
+            1 => {
+                self.abort(now, codes::EXECUTION_FAILED);
+                self.automatic = false;
+            }
+            _ => return codes::PARAM_VALUE,
+        }
+        codes::OK
+    }
+
+    /// `SetSpeed(1…100)`: the global speed override (%).
+    pub fn set_speed(&mut self, percent: f64) -> i32 {
+        if !(1.0..=100.0).contains(&percent) {
+            return codes::PARAM_VALUE;
+        }
+        self.speed_percent = percent;
+        codes::OK
+    }
+
+    /// `ResetAllError()`.
+    pub fn reset_errors(&mut self) -> i32 {
+        if self.estop {
+            return codes::EXECUTION_FAILED;
+        }
+        match &self.fault {
+            Some(f) if !f.resettable => codes::NOT_RESETTABLE,
+            _ => {
+                self.fault = None;
+                codes::OK
+            }
+        }
+    }
+
+    /// Presses (`true`) or releases the e-stop.
+    pub fn set_estop(&mut self, now: f64, pressed: bool) {
+        if pressed && !self.estop {
+            self.abort(now, codes::EMERGENCY_STOP);
+            let (main, sub) = MAIN_CODE_EMERGENCY_STOP;
+            self.fault = Some(Fault {
+                main,
+                sub,
+                resettable: true,
+            });
+        }
+        self.estop = pressed;
+    }
+
+    /// Sets the two safety-stop inputs; a rising one stops the arm.
+    pub fn set_safety_stop(&mut self, now: f64, inputs: [bool; 2]) {
+        if inputs
+            .iter()
+            .zip(&self.safety)
+            .any(|(&new, &old)| new && !old)
+        {
+            self.abort(now, codes::SAFETY_STOP);
+        }
+        self.safety = inputs;
+    }
+
+    /// Raises a fault (`main` ≠ 0: the arm stops) or clears it (`main` = 0).
+    pub fn set_fault(&mut self, now: f64, main: i32, sub: i32, resettable: bool) {
+        if main == 0 {
+            self.fault = None;
+            return;
+        }
+        self.abort(now, codes::EXECUTION_FAILED);
+        self.fault = Some(Fault {
+            main,
+            sub,
+            resettable,
+        });
+    }
+
+    // ── Arm motion ─────────────────────────────────────────────────────────
+
+    fn within_limits(&self, q: &Joints) -> bool {
+        q.iter()
+            .zip(&self.config.limits_deg)
+            .all(|(v, (lo, hi))| v.is_finite() && *v >= lo - 1e-9 && *v <= hi + 1e-9)
+    }
+
+    /// `MoveJ`: queues a move to `target` at `vel` % and `ovl` % of the maximum speed (times the
+    /// global override). Returns the ticket to wait on.
+    pub fn move_j(&mut self, now: f64, target: Joints, vel: f64, ovl: f64) -> Result<u64, i32> {
+        if let Some(code) = self.motion_refusal() {
+            return Err(code);
+        }
+        let in_range = |v: f64| v.is_finite() && v > 0.0 && v <= 100.0;
+        if !self.within_limits(&target) || !in_range(vel) || !in_range(ovl) {
+            return Err(codes::PARAM_VALUE);
+        }
+        if self.servo_session {
+            return Err(codes::EXECUTION_FAILED);
+        }
+        let ticket = self.next_ticket;
+        self.next_ticket += 1;
+        let scale = vel / 100.0 * ovl / 100.0 * self.speed_percent / 100.0;
+        self.queue.push_back(QueuedMove {
+            ticket,
+            target,
+            scale,
+        });
+        if self.active.is_none() {
+            self.start_next(now);
+        }
+        self.motion_commands += 1;
+        Ok(ticket)
+    }
+
+    fn start_next(&mut self, now: f64) {
+        self.advance(now);
+        self.servo_step = None;
+        if let Some(next) = self.queue.pop_front() {
+            let speed = self.config.max_speed_deg.map(|v| v * next.scale);
+            let acc = self.config.max_acc_deg.map(|v| v * next.scale);
+            self.active = Some(ActiveMove {
+                ticket: next.ticket,
+                profile: Profile::new(self.setpoint, next.target, now, &speed, &acc),
+            });
+        }
+    }
+
+    /// `ServoMoveStart()`.
+    pub fn servo_start(&mut self) -> i32 {
+        if let Some(code) = self.motion_refusal() {
+            return code;
+        }
+        if self.active.is_some() || !self.queue.is_empty() {
+            return codes::EXECUTION_FAILED;
+        }
+        self.servo_session = true;
+        codes::OK
+    }
+
+    /// `ServoJ(target, …, cmdT, …)`.
+    pub fn servo_j(&mut self, now: f64, target: Joints, cmd_t: f64) -> i32 {
+        if let Some(code) = self.motion_refusal() {
+            return code;
+        }
+        if !self.servo_session {
+            return codes::EXECUTION_FAILED;
+        }
+        if !(0.001..=0.016).contains(&cmd_t) || !finite(&target) {
+            return codes::PARAM_VALUE;
+        }
+        if !self.within_limits(&target) {
+            return codes::SERVOJ_OVER_LIMIT;
+        }
+        self.advance(now);
+        self.servo_step = Some(ServoStep {
+            from: self.setpoint,
+            to: target,
+            start: now,
+            duration: cmd_t,
+        });
+        self.motion_commands += 1;
+        codes::OK
+    }
+
+    /// `ServoMoveEnd()`: the last target is still reached.
+    pub fn servo_end(&mut self) -> i32 {
+        self.servo_session = false;
+        codes::OK
+    }
+
+    /// `StopMotion()`.
+    pub fn stop_motion(&mut self, now: f64) -> i32 {
+        self.abort(now, codes::EXECUTION_FAILED);
+        codes::OK
+    }
+
+    /// Moves the set point along the motion under way to time `now`.
+    fn advance(&mut self, now: f64) {
+        let dt = now - self.setpoint_time;
+        if let Some(active) = &self.active {
+            self.setpoint = active.profile.at(now);
+        } else if let Some(step) = &self.servo_step {
+            let desired = step.at(now);
+            self.setpoint = rate_limited(&self.setpoint, &desired, &self.config.max_speed_deg, dt);
+        }
+        self.setpoint_time = self.setpoint_time.max(now);
+    }
+
+    /// Whether the arm is commanded to be still: no move queued or under way, the last servo
+    /// target reached by the set point.
+    pub fn motion_done(&self) -> bool {
+        self.active.is_none()
+            && self.queue.is_empty()
+            && self.servo_step.as_ref().is_none_or(|s| {
+                s.finished(self.setpoint_time) && max_gap(&s.to, &self.setpoint) < 1e-6
+            })
+    }
+
+    // ── Gripper ────────────────────────────────────────────────────────────
+
+    /// `ActGripper(index, action)`: 1 activates, 0 resets.
+    pub fn act_gripper(&mut self, index: i64, action: i64) -> i32 {
+        if !(1..=8).contains(&index) {
+            return codes::PARAM_VALUE;
+        }
+        match action {
+            0 => {
+                self.gripper.active = false;
+                self.gripper.done = true;
+            }
+            1 => self.gripper.active = true,
+            _ => return codes::PARAM_VALUE,
+        }
+        codes::OK
+    }
+
+    /// `MoveGripper(index, pos, vel, force, maxtime, …)`: returns the command's number to wait
+    /// on when the call blocks.
+    pub fn move_gripper(
+        &mut self,
+        now: f64,
+        index: i64,
+        percent: [i64; 3],
+        max_time_ms: i64,
+    ) -> Result<u64, i32> {
+        if self.estop {
+            return Err(codes::EMERGENCY_STOP);
+        }
+        if self.safety.iter().any(|&s| s) {
+            return Err(codes::SAFETY_STOP);
+        }
+        if !(1..=8).contains(&index)
+            || percent.iter().any(|p| !(0..=100).contains(p))
+            || !(0..=30_000).contains(&max_time_ms)
+        {
+            return Err(codes::PARAM_VALUE);
+        }
+        if !self.gripper.active {
+            return Err(codes::GRIPPER_MOTION);
+        }
+        let max_time = if max_time_ms == 0 {
+            30.0
+        } else {
+            max_time_ms as f64 / 1000.0
+        };
+        self.motion_commands += 1;
+        Ok(self.gripper.command(now, percent[0] as f64, max_time))
+    }
+
+    /// Whether gripper command `command` is still moving.
+    pub fn gripper_moving(&self, command: u64) -> bool {
+        self.gripper.command == command && !self.gripper.done
+    }
+
+    /// `GetGripperMotionDone()`: `(fault, status)`, status 1 when done.
+    pub fn gripper_motion_done(&self) -> (i32, i32) {
+        (0, self.gripper.done as i32)
+    }
+
+    // ── Kinematics ─────────────────────────────────────────────────────────
+
+    /// `GetForwardKin(joints)`: the TCP pose on the wire.
+    pub fn forward_kin(&self, q_deg: &Joints) -> Result<[f64; 6], i32> {
+        if !finite(q_deg) {
+            return Err(codes::PARAM_VALUE);
+        }
+        let q: Vec<f64> = q_deg.iter().map(|v| v.to_radians()).collect();
+        Ok(pose_to_wire(&self.chain.forward(&q)))
+    }
+
+    /// `GetInverseKin(0, pose, -1)`: the joints nearest the current ones that reach `pose`.
+    pub fn inverse_kin(&self, pose: &[f64; 6]) -> Result<Joints, i32> {
+        if !finite(pose) {
+            return Err(codes::PARAM_VALUE);
+        }
+        let seed: Vec<f64> = self
+            .measured
+            .joints_deg
+            .iter()
+            .map(|v| v.to_radians())
+            .collect();
+        let q = self
+            .chain
+            .inverse(&wire_to_pose(pose), &seed, 1e-5)
+            .map_err(|_| codes::IK_FAILED)?;
+        let mut out = [0.0; 6];
+        for (o, v) in out.iter_mut().zip(&q) {
+            *o = v.to_degrees();
+        }
+        Ok(out)
+    }
+
+    // ── The simulation's side ──────────────────────────────────────────────
+
+    /// The set points for time `now`.
+    pub fn setpoint(&mut self, now: f64) -> Setpoint {
+        self.advance(now);
+        Setpoint {
+            joints_deg: self.setpoint,
+            gripper_percent: self.gripper.target,
+        }
+    }
+
+    /// Feeds what the simulation measured at `now`; ends moves that have arrived.
+    pub fn observe(&mut self, now: f64, measured: Measured) {
+        self.gripper.observe(now, measured.gripper_percent);
+        self.measured = measured;
+        let Some(active) = &self.active else {
+            return;
+        };
+        let end = active.profile.end();
+        if now < end {
+            return;
+        }
+        let m = &self.measured;
+        let settled = max_gap(&m.joints_deg, &active.profile.to) < 2.0
+            && m.joint_speeds_deg.iter().all(|v| v.abs() < 1.0);
+        if settled || now >= end + self.config.settle_timeout {
+            let ticket = active.ticket;
+            self.active = None;
+            self.record(ticket, codes::OK);
+            self.start_next(now);
+        }
+    }
+
+    /// Puts the arm at `q_deg` at rest and the gripper open (a new episode): every motion is
+    /// aborted (14), faults and settings stay.
+    pub fn rehome(&mut self, now: f64, q_deg: Joints) {
+        self.abort(now, codes::EXECUTION_FAILED);
+        self.setpoint = q_deg;
+        self.measured.joints_deg = q_deg;
+        self.measured.joint_speeds_deg = [0.0; 6];
+        self.gripper.hold_at(100.0);
+    }
+
+    /// Motion commands accepted so far (`MoveJ`, `ServoJ`, `MoveGripper`).
+    pub fn motion_commands(&self) -> u64 {
+        self.motion_commands
+    }
+
+    /// The latest measurement.
+    pub fn measured(&self) -> &Measured {
+        &self.measured
+    }
+
+    /// The state the controller reports, with `joints_deg` as the encoders read (the caller may
+    /// add noise); the TCP is computed from them.
+    pub fn state_with_joints(&self, joints_deg: Joints) -> RobotState {
+        let q: Vec<f64> = joints_deg.iter().map(|v| v.to_radians()).collect();
+        let (main_code, sub_code) = self.fault.as_ref().map_or((0, 0), |f| (f.main, f.sub));
+        let motion_done = self.motion_done();
+        RobotState {
+            joints_deg,
+            joint_speeds_deg: self.measured.joint_speeds_deg,
+            tcp: pose_to_wire(&self.chain.forward(&q)),
+            robot_state: if motion_done { 1 } else { 2 },
+            robot_mode: if self.automatic { 0 } else { 1 },
+            main_code,
+            sub_code,
+            motion_done,
+            emergency_stop: self.estop,
+            safety_stop: self.safety,
+            enabled: self.enabled,
+            gripper_position: self.gripper.position.round().clamp(0.0, 100.0) as u8,
+            gripper_motion_done: self.gripper.done,
+            gripper_active: self.gripper.active,
+            gripper_fault: 0,
+        }
+    }
+
+    /// The state the controller reports.
+    pub fn state(&self) -> RobotState {
+        self.state_with_joints(self.measured.joints_deg)
+    }
+}

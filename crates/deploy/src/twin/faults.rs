@@ -1,0 +1,345 @@
+//! Fault injection: what can go wrong between a deploy loop and a controller, on demand.
+//!
+//! Every fault is a [`FaultCommand`], whoever asks for it: the `fairgrasp twin` flags at start
+//! (`--latency-ms`, `--joint-noise-deg`, `--fault NAME=VALUE`), a test through
+//! [`crate::twin::TwinHandle::inject`], or another process through the extra XML-RPC method
+//! `TwinInjectFault(name, value)`. Names and values (the text form [`FaultCommand::parse`]
+//! reads):
+//!
+//! | name | value | effect |
+//! |---|---|---|
+//! | `latency_ms` | ms | every XML-RPC reply comes this much later (half before the call acts, half after) |
+//! | `stream_latency_ms` | ms | every CNDE frame shows the robot as it was this long ago |
+//! | `joint_noise_deg` | deg | Gaussian noise (standard deviation) on the reported joints, CNDE and XML-RPC; the TCP follows them |
+//! | `pose_noise_mm` | mm | Gaussian noise on the published object position |
+//! | `slow` | `METHOD:MS[:COUNT]`, `*:MS[:COUNT]`, `off` | calls of one method (or every call) delayed by MS, the next COUNT calls or all |
+//! | `stall` | 1 / 0 | the CNDE stream stops sending frames (connections stay open) / resumes |
+//! | `reset_stream` | any | every CNDE connection is reset (RST) now |
+//! | `error` | `MAIN,SUB[,fatal]`, `0` | a controller fault in main_code/sub_code: the arm stops; `fatal` ones `ResetAllError` cannot clear (30); 0 clears |
+//! | `estop` | 1 / 0 | the e-stop is pressed (the arm stops, main_code 31) / released |
+//! | `safety_stop` | 1 / 0 / `A,B` | safety-stop inputs 0 and 1 (1 sets both): the arm stops, motion calls get 99 |
+//! | `clear` | any | everything above back to normal, faults cleared |
+//!
+//! The `Twin…` methods themselves are never delayed, so a test can always reach the twin.
+
+use std::fmt;
+
+/// Delay of slow replies.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlowReplies {
+    /// The method to slow down; every method when `None`.
+    pub method: Option<String>,
+    pub delay_ms: f64,
+    /// How many more calls to slow down; every one when `None`.
+    pub remaining: Option<u32>,
+}
+
+/// The faults that stay in force until changed (the one-shot ones act on the controller and
+/// the stream directly).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FaultSettings {
+    pub latency_ms: f64,
+    pub stream_latency_ms: f64,
+    pub joint_noise_deg: f64,
+    pub pose_noise_mm: f64,
+    pub slow: Option<SlowReplies>,
+    pub stalled: bool,
+}
+
+impl FaultSettings {
+    /// The extra delay for one call of `method`, counting down a limited slow-down.
+    pub fn take_slow_delay(&mut self, method: &str) -> f64 {
+        let Some(slow) = &mut self.slow else {
+            return 0.0;
+        };
+        if slow.method.as_deref().is_some_and(|m| m != method) {
+            return 0.0;
+        }
+        let delay = slow.delay_ms;
+        if let Some(n) = &mut slow.remaining {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                self.slow = None;
+            }
+        }
+        delay
+    }
+}
+
+/// One fault to inject (see the [module](self) documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub enum FaultCommand {
+    LatencyMs(f64),
+    StreamLatencyMs(f64),
+    JointNoiseDeg(f64),
+    PoseNoiseMm(f64),
+    Slow(Option<SlowReplies>),
+    Stall(bool),
+    ResetStream,
+    Error { main: i32, sub: i32, fatal: bool },
+    Estop(bool),
+    SafetyStop([bool; 2]),
+    Clear,
+}
+
+/// The fault names [`FaultCommand::parse`] knows.
+pub const FAULT_NAMES: [&str; 11] = [
+    "latency_ms",
+    "stream_latency_ms",
+    "joint_noise_deg",
+    "pose_noise_mm",
+    "slow",
+    "stall",
+    "reset_stream",
+    "error",
+    "estop",
+    "safety_stop",
+    "clear",
+];
+
+fn number(name: &str, value: &str, max: f64) -> Result<f64, String> {
+    let v: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| format!("{name}: expected a number, got `{value}`"))?;
+    if !(v.is_finite() && (0.0..=max).contains(&v)) {
+        return Err(format!("{name}: must be in 0…{max}, got {v}"));
+    }
+    Ok(v)
+}
+
+fn flag(name: &str, value: &str) -> Result<bool, String> {
+    match value.trim() {
+        "1" | "true" | "on" => Ok(true),
+        "0" | "false" | "off" => Ok(false),
+        other => Err(format!("{name}: expected 1 or 0, got `{other}`")),
+    }
+}
+
+fn code(name: &str, value: &str) -> Result<i32, String> {
+    value
+        .trim()
+        .parse()
+        .map_err(|_| format!("{name}: expected an integer code, got `{value}`"))
+}
+
+impl FaultCommand {
+    /// Reads `name` and its `value` as text (the table in the [module](self) documentation).
+    pub fn parse(name: &str, value: &str) -> Result<Self, String> {
+        Ok(match name.trim() {
+            "latency_ms" => Self::LatencyMs(number(name, value, 60_000.0)?),
+            "stream_latency_ms" => Self::StreamLatencyMs(number(name, value, 1_000.0)?),
+            "joint_noise_deg" => Self::JointNoiseDeg(number(name, value, 10.0)?),
+            "pose_noise_mm" => Self::PoseNoiseMm(number(name, value, 100.0)?),
+            "slow" => Self::Slow(parse_slow(value)?),
+            "stall" => Self::Stall(flag(name, value)?),
+            "reset_stream" => Self::ResetStream,
+            "error" => {
+                let parts: Vec<&str> = value.split(',').map(str::trim).collect();
+                match parts.as_slice() {
+                    [zero] if code(name, zero)? == 0 => Self::Error {
+                        main: 0,
+                        sub: 0,
+                        fatal: false,
+                    },
+                    [main, sub] => Self::Error {
+                        main: code(name, main)?,
+                        sub: code(name, sub)?,
+                        fatal: false,
+                    },
+                    [main, sub, "fatal"] => Self::Error {
+                        main: code(name, main)?,
+                        sub: code(name, sub)?,
+                        fatal: true,
+                    },
+                    _ => {
+                        return Err(format!(
+                            "error: expected MAIN,SUB or MAIN,SUB,fatal or 0, got `{value}`"
+                        ));
+                    }
+                }
+            }
+            "estop" => Self::Estop(flag(name, value)?),
+            "safety_stop" => {
+                let parts: Vec<&str> = value.split(',').collect();
+                match parts.as_slice() {
+                    [both] => {
+                        let on = flag(name, both)?;
+                        Self::SafetyStop([on, on])
+                    }
+                    [a, b] => Self::SafetyStop([flag(name, a)?, flag(name, b)?]),
+                    _ => return Err(format!("safety_stop: expected 1, 0 or A,B, got `{value}`")),
+                }
+            }
+            "clear" => Self::Clear,
+            other => {
+                return Err(format!(
+                    "unknown fault `{other}`; known: {}",
+                    FAULT_NAMES.join(", ")
+                ));
+            }
+        })
+    }
+
+    /// Reads `NAME=VALUE` (the `--fault` flag).
+    pub fn parse_assignment(text: &str) -> Result<Self, String> {
+        let (name, value) = text
+            .split_once('=')
+            .ok_or_else(|| format!("expected NAME=VALUE, got `{text}`"))?;
+        Self::parse(name, value)
+    }
+}
+
+fn parse_slow(value: &str) -> Result<Option<SlowReplies>, String> {
+    let value = value.trim();
+    if value == "off" || value == "0" {
+        return Ok(None);
+    }
+    let parts: Vec<&str> = value.split(':').collect();
+    let (method, delay, count) = match parts.as_slice() {
+        [m, d] => (*m, *d, None),
+        [m, d, c] => (*m, *d, Some(*c)),
+        _ => {
+            return Err(format!(
+                "slow: expected METHOD:MS[:COUNT], *:MS[:COUNT] or off, got `{value}`"
+            ));
+        }
+    };
+    let remaining = match count {
+        None => None,
+        Some(c) => Some(
+            c.parse::<u32>()
+                .ok()
+                .filter(|&n| n > 0)
+                .ok_or_else(|| format!("slow: COUNT must be a positive integer, got `{c}`"))?,
+        ),
+    };
+    Ok(Some(SlowReplies {
+        method: (method != "*").then(|| method.to_string()),
+        delay_ms: number("slow", delay, 600_000.0)?,
+        remaining,
+    }))
+}
+
+impl fmt::Display for FaultCommand {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::LatencyMs(v) => write!(f, "reply latency {v} ms"),
+            Self::StreamLatencyMs(v) => write!(f, "stream latency {v} ms"),
+            Self::JointNoiseDeg(v) => write!(f, "joint noise {v}°"),
+            Self::PoseNoiseMm(v) => write!(f, "object pose noise {v} mm"),
+            Self::Slow(None) => write!(f, "slow replies off"),
+            Self::Slow(Some(s)) => write!(
+                f,
+                "{} delayed {} ms{}",
+                s.method.as_deref().unwrap_or("every call"),
+                s.delay_ms,
+                s.remaining
+                    .map(|n| format!(" ({n} calls)"))
+                    .unwrap_or_default()
+            ),
+            Self::Stall(true) => write!(f, "state stream stalled"),
+            Self::Stall(false) => write!(f, "state stream resumed"),
+            Self::ResetStream => write!(f, "state stream connections reset"),
+            Self::Error { main: 0, .. } => write!(f, "fault cleared"),
+            Self::Error { main, sub, fatal } => write!(
+                f,
+                "controller fault main {main} sub {sub}{}",
+                if *fatal { " (not resettable)" } else { "" }
+            ),
+            Self::Estop(true) => write!(f, "e-stop pressed"),
+            Self::Estop(false) => write!(f, "e-stop released"),
+            Self::SafetyStop(s) => write!(f, "safety stop inputs {}, {}", s[0] as u8, s[1] as u8),
+            Self::Clear => write!(f, "all faults cleared"),
+        }
+    }
+}
+
+/// A standard normal draw (Box–Muller; two lines do not justify another dependency).
+pub fn gaussian(rng: &mut impl rand::Rng) -> f64 {
+    let u1: f64 = rng.random::<f64>().max(1e-300);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_every_fault_and_names_mistakes() {
+        assert_eq!(
+            FaultCommand::parse("latency_ms", "10").unwrap(),
+            FaultCommand::LatencyMs(10.0)
+        );
+        assert_eq!(
+            FaultCommand::parse_assignment("error=5,3,fatal").unwrap(),
+            FaultCommand::Error {
+                main: 5,
+                sub: 3,
+                fatal: true
+            }
+        );
+        assert_eq!(
+            FaultCommand::parse("safety_stop", "0,1").unwrap(),
+            FaultCommand::SafetyStop([false, true])
+        );
+        let slow = FaultCommand::parse("slow", "MoveJ:2000:1").unwrap();
+        assert_eq!(
+            slow,
+            FaultCommand::Slow(Some(SlowReplies {
+                method: Some("MoveJ".into()),
+                delay_ms: 2000.0,
+                remaining: Some(1)
+            }))
+        );
+        assert_eq!(
+            FaultCommand::parse("slow", "off").unwrap(),
+            FaultCommand::Slow(None)
+        );
+        for (name, value) in [
+            ("latency_ms", "-1"),
+            ("joint_noise_deg", "abc"),
+            ("stall", "maybe"),
+            ("error", "1"),
+            ("slow", "MoveJ"),
+            ("slow", "*:10:0"),
+            ("teleport", "1"),
+        ] {
+            let e = FaultCommand::parse(name, value).unwrap_err();
+            assert!(e.contains(name), "{e}");
+        }
+        assert!(FaultCommand::parse_assignment("estop").is_err());
+    }
+
+    #[test]
+    fn slow_replies_count_down_and_match_their_method() {
+        let mut s = FaultSettings {
+            slow: Some(SlowReplies {
+                method: Some("MoveJ".into()),
+                delay_ms: 50.0,
+                remaining: Some(2),
+            }),
+            ..FaultSettings::default()
+        };
+        assert_eq!(s.take_slow_delay("ServoJ"), 0.0);
+        assert_eq!(s.take_slow_delay("MoveJ"), 50.0);
+        assert_eq!(s.take_slow_delay("MoveJ"), 50.0);
+        assert_eq!(s.take_slow_delay("MoveJ"), 0.0);
+        assert!(s.slow.is_none());
+    }
+
+    #[test]
+    fn gaussian_has_unit_spread() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let n = 20_000;
+        let draws: Vec<f64> = (0..n).map(|_| gaussian(&mut rng)).collect();
+        let mean = draws.iter().sum::<f64>() / n as f64;
+        let var = draws.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / n as f64;
+        assert!(
+            mean.abs() < 0.03 && (var - 1.0).abs() < 0.05,
+            "{mean} {var}"
+        );
+    }
+}

@@ -1,0 +1,106 @@
+//! The twin's gripper as the controller sees it: activation, a commanded position in % of the
+//! stroke (0 closed … 100 open), and "motion done" when the fingers arrive, stall on an object
+//! or run out of the command's time.
+
+/// Position error that counts as arrived (% of the stroke).
+const ARRIVED_PERCENT: f64 = 1.0;
+/// Movement smaller than this (%) over [`STALL_SECONDS`] is a stall (fingers on an object).
+const PROGRESS_PERCENT: f64 = 0.3;
+const STALL_SECONDS: f64 = 0.15;
+
+/// The gripper state machine.
+#[derive(Clone, Debug)]
+pub struct Gripper {
+    pub active: bool,
+    /// Commanded position (%).
+    pub target: f64,
+    /// Measured position (%).
+    pub position: f64,
+    pub done: bool,
+    /// Counts `MoveGripper` commands, so a blocking call can wait for its own.
+    pub command: u64,
+    commanded_at: f64,
+    max_time: f64,
+    /// Last time the fingers moved by more than [`PROGRESS_PERCENT`], and where they were.
+    progress: (f64, f64),
+}
+
+impl Gripper {
+    /// An open gripper, activated or not.
+    pub fn new(active: bool) -> Self {
+        Self {
+            active,
+            target: 100.0,
+            position: 100.0,
+            done: true,
+            command: 0,
+            commanded_at: 0.0,
+            max_time: f64::INFINITY,
+            progress: (0.0, 100.0),
+        }
+    }
+
+    /// Starts a move to `percent` (0…100) that gives up after `max_time` s; returns its number.
+    pub fn command(&mut self, now: f64, percent: f64, max_time: f64) -> u64 {
+        self.target = percent.clamp(0.0, 100.0);
+        self.done = (self.position - self.target).abs() < ARRIVED_PERCENT;
+        self.commanded_at = now;
+        self.max_time = max_time;
+        self.progress = (now, self.position);
+        self.command += 1;
+        self.command
+    }
+
+    /// Feeds the measured position (%).
+    pub fn observe(&mut self, now: f64, position: f64) {
+        self.position = position;
+        if self.done {
+            return;
+        }
+        if (position - self.progress.1).abs() > PROGRESS_PERCENT {
+            self.progress = (now, position);
+        }
+        let arrived = (position - self.target).abs() < ARRIVED_PERCENT;
+        let stalled = now - self.progress.0 > STALL_SECONDS;
+        let timed_out = now - self.commanded_at > self.max_time;
+        self.done = arrived || stalled || timed_out;
+    }
+
+    /// Sets the target to where the fingers are (a reset of the world put them there).
+    pub fn hold_at(&mut self, position: f64) {
+        self.position = position;
+        self.target = position;
+        self.done = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn done_on_arrival_on_stall_and_on_timeout() {
+        let mut g = Gripper::new(true);
+        g.command(0.0, 0.0, 10.0);
+        assert!(!g.done);
+        g.observe(0.05, 50.0);
+        assert!(!g.done);
+        g.observe(0.1, 0.5);
+        assert!(g.done, "arrived");
+
+        g.command(1.0, 100.0, 10.0);
+        g.observe(1.05, 40.0);
+        g.observe(1.1, 40.1);
+        assert!(!g.done, "not yet stalled");
+        g.observe(1.25, 40.1);
+        assert!(g.done, "stalled on an object");
+
+        g.command(2.0, 0.0, 0.2);
+        for i in 1..=3 {
+            g.observe(2.0 + i as f64 * 0.05, 40.0 - i as f64 * 5.0);
+        }
+        assert!(!g.done);
+        g.observe(2.25, 20.0);
+        assert!(g.done, "out of time");
+    }
+}

@@ -1,0 +1,397 @@
+//! The twin's physical world: an arm task's scene (the FR5, its gripper, the table, the
+//! objects) and the task's own judge of each episode.
+//!
+//! The world is the task's *nominal* scene: no domain randomisation (the real world does not
+//! change between episodes), the configured object mass and friction; random object shapes are
+//! drawn when the environment's `[shapes]` section enables them. Episodes are judged by the
+//! task's [`Task::evaluate`] on [`ArmState::from_scene`], once per control period, as in
+//! training: success and failure (an object off the table) latch until the next reset.
+
+use super::controller::{Measured, Setpoint};
+use crate::error::{DeployError, Result};
+use fairgrasp_env::arm::{ArmEnvConfig, ArmState, Evaluation, Task};
+use fairgrasp_env::tasks::grasp::Grasp;
+use fairgrasp_env::tasks::pick_place::PickPlace;
+use fairgrasp_env::tasks::sort::Sort;
+use fairgrasp_sim::kinematics::SerialChain;
+use fairgrasp_sim::rapier3d::na::Isometry3;
+use fairgrasp_sim::scene::Scene;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+/// What the twin needs of an arm task, whatever its settings types.
+trait TaskScene: Send {
+    fn scene(&self) -> &Scene;
+    fn scene_mut(&mut self) -> &mut Scene;
+    /// Arm at home, objects placed by the task from `seed`, scene settled.
+    fn start_episode(&mut self, seed: u64) -> Result<()>;
+    fn evaluate(&mut self, state: &ArmState) -> Evaluation;
+}
+
+struct ArmTask<T: Task> {
+    config: ArmEnvConfig<T::Settings, T::Reward>,
+    scene: Scene,
+    task: T,
+}
+
+impl<T: Task> ArmTask<T> {
+    fn build(table: &toml::Table) -> Result<Box<dyn TaskScene>> {
+        let config: ArmEnvConfig<T::Settings, T::Reward> =
+            fairgrasp_env::config::from_table(table.clone())?;
+        config.validate()?;
+        let mut scene_config = config.scene.clone();
+        T::configure_scene(&config, &mut scene_config)?;
+        let scene = Scene::new(scene_config).map_err(fairgrasp_env::EnvError::from)?;
+        let task = T::new(&config, &scene)?;
+        Ok(Box::new(Self {
+            config,
+            scene,
+            task,
+        }))
+    }
+}
+
+impl<T: Task> TaskScene for ArmTask<T> {
+    fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    fn scene_mut(&mut self) -> &mut Scene {
+        &mut self.scene
+    }
+
+    fn start_episode(&mut self, seed: u64) -> Result<()> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
+        self.scene
+            .restore_home(&self.scene.nominal_params(), &[])
+            .map_err(sim)?;
+        if self.config.shapes.enabled {
+            for i in 0..self.scene.num_objects() {
+                let nominal = self.scene.config().objects[i].clone();
+                let shape = fairgrasp_env::tasks::shapes::draw(&self.config.shapes, &mut rng);
+                self.scene
+                    .set_object_params(i, &shape, nominal.mass, nominal.friction)
+                    .map_err(sim)?;
+            }
+        }
+        self.task.initialize_episode(&mut self.scene, &mut rng)?;
+        Ok(())
+    }
+
+    fn evaluate(&mut self, state: &ArmState) -> Evaluation {
+        self.task.evaluate(&self.scene, state)
+    }
+}
+
+/// The arm tasks the twin can stage.
+pub const TASK_IDS: [&str; 3] = ["FaArmGrasp-v0", "FaArmPickPlace-v0", "FaArmSort-v0"];
+
+/// How one episode went, by the task's rule.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct EpisodeResult {
+    /// 1 for the first episode, counting every reset.
+    pub number: u64,
+    pub seed: u64,
+    /// The task's success rule held at some control step.
+    pub success: bool,
+    /// The task failed for good (an object left the table).
+    pub failed: bool,
+    /// Highest lift of object 0 above its resting height (m).
+    pub max_lift: f64,
+    /// Control steps judged.
+    pub steps: u32,
+    /// The control step at which success was first found.
+    pub success_step: Option<u32>,
+    /// Object 0 is held right now (both pads on it, gripper closing).
+    pub grasped: bool,
+}
+
+/// The scene, the task, and the judged episode.
+pub struct World {
+    env_id: String,
+    inner: Box<dyn TaskScene>,
+    chain: SerialChain,
+    substeps: u32,
+    physics_steps: u64,
+    episode: EpisodeResult,
+}
+
+impl World {
+    /// Builds `env_id` (one of [`TASK_IDS`]) from its configuration table and starts episode 1
+    /// from `seed`.
+    pub fn new(env_id: &str, table: &toml::Table, seed: u64) -> Result<Self> {
+        let inner = match env_id {
+            "FaArmGrasp-v0" => ArmTask::<Grasp>::build(table)?,
+            "FaArmPickPlace-v0" => ArmTask::<PickPlace>::build(table)?,
+            "FaArmSort-v0" => ArmTask::<Sort>::build(table)?,
+            other => {
+                return Err(DeployError::config(
+                    "--env",
+                    format!(
+                        "the twin stages the arm tasks ({}), not `{other}`",
+                        TASK_IDS.join(", ")
+                    ),
+                ));
+            }
+        };
+        let scene = inner.scene();
+        let chain = SerialChain::new(&scene.robot().model, "tcp")
+            .map_err(|e| DeployError::Env(e.into()))?;
+        let substeps = scene.config().physics.substeps;
+        let mut world = Self {
+            env_id: env_id.to_string(),
+            inner,
+            chain,
+            substeps,
+            physics_steps: 0,
+            episode: EpisodeResult::default(),
+        };
+        world.start_episode(seed)?;
+        Ok(world)
+    }
+
+    pub fn env_id(&self) -> &str {
+        &self.env_id
+    }
+
+    pub fn scene(&self) -> &Scene {
+        self.inner.scene()
+    }
+
+    /// The kinematic chain from the arm base to the TCP (the gripper's centre point).
+    pub fn chain(&self) -> &SerialChain {
+        &self.chain
+    }
+
+    /// The physics timestep (s).
+    pub fn dt(&self) -> f64 {
+        self.scene().dt() as f64
+    }
+
+    /// The arm's home joint angles (deg).
+    pub fn home_deg(&self) -> [f64; 6] {
+        let home = &self.scene().config().arm.home;
+        std::array::from_fn(|j| home.get(j).copied().unwrap_or(0.0) as f64).map(f64::to_degrees)
+    }
+
+    /// Joint limits (rad).
+    pub fn limits(&self) -> Vec<(f64, f64)> {
+        self.chain.limits.clone()
+    }
+
+    /// Resets the scene (arm home, gripper open, objects placed from `seed`) and starts the next
+    /// judged episode.
+    pub fn start_episode(&mut self, seed: u64) -> Result<()> {
+        self.inner.start_episode(seed)?;
+        self.episode = EpisodeResult {
+            number: self.episode.number + 1,
+            seed,
+            ..EpisodeResult::default()
+        };
+        Ok(())
+    }
+
+    /// The episode so far.
+    pub fn episode(&self) -> &EpisodeResult {
+        &self.episode
+    }
+
+    /// Applies the set points and advances one physics step; every `substeps` steps the task
+    /// judges the state.
+    pub fn step(&mut self, setpoint: &Setpoint) -> Result<()> {
+        let scene = self.inner.scene_mut();
+        let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
+        let q: Vec<f32> = setpoint
+            .joints_deg
+            .iter()
+            .map(|v| v.to_radians() as f32)
+            .collect();
+        scene.set_arm_targets(&q).map_err(sim)?;
+        let opening = (setpoint.gripper_percent / 100.0) as f32 * scene.max_opening();
+        scene.set_gripper_target(opening).map_err(sim)?;
+        scene.step_physics().map_err(sim)?;
+        self.physics_steps += 1;
+        if self.physics_steps.is_multiple_of(self.substeps as u64) {
+            self.inner.scene().check_finite().map_err(sim)?;
+            self.judge();
+        }
+        Ok(())
+    }
+
+    fn judge(&mut self) {
+        let state = ArmState::from_scene(self.inner.scene());
+        let evaluation = self.inner.evaluate(&state);
+        let e = &mut self.episode;
+        e.steps += 1;
+        if evaluation.success && !e.success {
+            e.success = true;
+            e.success_step = Some(e.steps);
+        }
+        e.failed |= evaluation.failure.is_some();
+        if !state.objects.is_empty() {
+            e.max_lift = e.max_lift.max(state.lift(0));
+            e.grasped = state.grasped(0);
+        }
+    }
+
+    /// What the controller's encoders and the gripper read now.
+    pub fn measure(&self) -> Measured {
+        let scene = self.scene();
+        let q = scene.arm_positions();
+        let qd = scene.arm_velocities();
+        let deg = |v: &[f32]| -> [f64; 6] {
+            std::array::from_fn(|j| (v.get(j).copied().unwrap_or(0.0) as f64).to_degrees())
+        };
+        Measured {
+            joints_deg: deg(&q),
+            joint_speeds_deg: deg(&qd),
+            gripper_percent: (scene.gripper_opening() / scene.max_opening()) as f64 * 100.0,
+        }
+    }
+
+    /// Object 0's pose in the robot base frame (m).
+    pub fn object_pose(&self) -> Option<Isometry3<f64>> {
+        let scene = self.scene();
+        (scene.num_objects() > 0).then(|| scene.base_pose().inverse() * scene.object_state(0).pose)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::twin::controller::{
+        Controller, ControllerConfig, StartState, codes, pose_to_wire, wire_to_pose,
+    };
+    use crate::twin::motion::max_gap;
+
+    /// The controller and the world in lockstep, in simulated time (no threads, no clock).
+    struct Rig {
+        world: World,
+        c: Controller,
+        t: f64,
+    }
+
+    impl Rig {
+        fn new(seed: u64) -> Self {
+            let world = World::new("FaArmGrasp-v0", &toml::Table::new(), seed).unwrap();
+            let config = ControllerConfig::fr5(
+                &world.limits(),
+                StartState {
+                    gripper_active: true,
+                    ..StartState::default()
+                },
+            );
+            let mut c = Controller::new(config, world.chain().clone(), world.home_deg(), 0.0);
+            c.observe(0.0, world.measure());
+            Self { world, c, t: 0.0 }
+        }
+
+        fn step(&mut self) {
+            self.t += self.world.dt();
+            let sp = self.c.setpoint(self.t);
+            self.world.step(&sp).unwrap();
+            self.c.observe(self.t, self.world.measure());
+        }
+
+        fn run(&mut self, seconds: f64) {
+            let n = (seconds / self.world.dt()).round() as usize;
+            for _ in 0..n {
+                self.step();
+            }
+        }
+
+        fn move_j(&mut self, target: [f64; 6], vel: f64) {
+            let ticket = self.c.move_j(self.t, target, vel, 100.0).unwrap();
+            for _ in 0..5000 {
+                if let Some(code) = self.c.outcome(ticket) {
+                    assert_eq!(code, codes::OK);
+                    return;
+                }
+                self.step();
+            }
+            panic!("MoveJ never ended");
+        }
+    }
+
+    #[test]
+    fn the_arm_holds_home_and_tracks_a_move() {
+        let mut rig = Rig::new(3);
+        let home = rig.world.home_deg();
+        rig.run(0.5);
+        let m = rig.world.measure();
+        assert!(max_gap(&m.joints_deg, &home) < 1.0, "{m:?}");
+        assert!(
+            (m.gripper_percent - 100.0).abs() < 2.0,
+            "gripper open at start"
+        );
+        let mut target = home;
+        target[0] += 20.0;
+        target[2] -= 10.0;
+        rig.move_j(target, 50.0);
+        let m = rig.world.measure();
+        assert!(max_gap(&m.joints_deg, &target) < 2.0, "arrived: {m:?}");
+        let object = rig.world.object_pose().unwrap();
+        assert!(object.translation.z > -0.05 && object.translation.z < 0.1);
+        assert!(!rig.world.episode().success);
+        assert!(
+            rig.world.episode().steps > 20,
+            "judged every control period"
+        );
+    }
+
+    /// MoveJ above the cube, down, close the gripper, up: the task's own rule says success.
+    #[test]
+    fn a_scripted_grasp_through_the_controller_succeeds() {
+        let mut rig = Rig::new(11);
+        let object = rig.world.object_pose().unwrap();
+        let tcp = pose_to_wire(
+            &rig.world
+                .chain()
+                .forward(&rig.world.home_deg().map(f64::to_radians)),
+        );
+        let yaw = grasp_yaw(object.rotation.euler_angles().2.to_degrees(), tcp[5]);
+        let p = object.translation.vector * 1000.0;
+        let pose = |dz: f64| [p.x, p.y, p.z + dz, 180.0, 0.0, yaw];
+        let above = rig.c.inverse_kin(&pose(100.0)).unwrap();
+        rig.move_j(above, 60.0);
+        let down = rig.c.inverse_kin(&pose(0.0)).unwrap();
+        rig.move_j(down, 20.0);
+        let g = rig.c.move_gripper(rig.t, 1, [0, 100, 50], 3000).unwrap();
+        while rig.c.gripper_moving(g) {
+            rig.step();
+        }
+        let up = rig.c.inverse_kin(&pose(120.0)).unwrap();
+        rig.move_j(up, 30.0);
+        rig.run(0.6);
+        let e = rig.world.episode();
+        assert!(e.success, "{e:?}");
+        assert!(e.grasped && e.max_lift > 0.05, "{e:?}");
+        assert!(!e.failed);
+        // The pose feed's frame: the held cube hangs at the TCP.
+        let held = rig.world.object_pose().unwrap();
+        let tcp_now = wire_to_pose(&rig.c.state().tcp);
+        assert!((held.translation.vector - tcp_now.translation.vector).norm() < 0.03);
+    }
+
+    /// The top-down TCP yaw (deg) that grasps a cube of yaw `object` across two faces,
+    /// nearest to `current`.
+    fn grasp_yaw(object: f64, current: f64) -> f64 {
+        (-4..=4)
+            .map(|k| object + 90.0 * k as f64)
+            .min_by(|a, b| (a - current).abs().total_cmp(&(b - current).abs()))
+            .unwrap()
+    }
+
+    #[test]
+    fn only_arm_tasks_are_staged() {
+        let e = World::new("Pendulum-v1", &toml::Table::new(), 0)
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("FaArmGrasp-v0"), "{e}");
+        let mut bad = toml::Table::new();
+        bad.insert("nonsense".into(), toml::Value::Integer(1));
+        assert!(World::new("FaArmGrasp-v0", &bad, 0).is_err());
+    }
+}
