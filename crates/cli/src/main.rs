@@ -4,6 +4,7 @@
 mod bench;
 mod bench_learning;
 mod demo;
+mod deploy_cmd;
 mod env_cmd;
 mod eval_cmd;
 mod inspect;
@@ -39,6 +40,8 @@ enum Command {
     /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
     #[command(subcommand)]
     Env(env_cmd::EnvCommand),
+    /// Run a trained policy on a FAIRINO controller or its digital twin (dry run unless --live).
+    Deploy(deploy_cmd::DeployArgs),
     /// Measure simulator throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -133,6 +136,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
+        Command::Deploy(args) => deploy_cmd::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

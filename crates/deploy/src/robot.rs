@@ -150,4 +150,3 @@ pub trait RobotLink: Send {
     /// A non-zero error code is a [`crate::DeployError::Controller`].
     fn send(&mut self, command: &RobotCommand) -> Result<()>;
 }
-

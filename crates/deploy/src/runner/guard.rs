@@ -13,6 +13,8 @@ pub struct GuardedLink {
     /// The fault that stopped the arm, once one has.
     tripped: Option<Fault>,
     last_sequence: u64,
+    /// From the fault's detection to StopMotion and ServoMoveEnd both answered.
+    stopped_in: Option<std::time::Duration>,
     pub log: JsonLog,
 }
 
@@ -24,6 +26,7 @@ impl GuardedLink {
             live,
             tripped: None,
             last_sequence: u64::MAX,
+            stopped_in: None,
             log,
         }
     }
@@ -87,12 +90,17 @@ impl GuardedLink {
                 self.log.sent(&command, Ok(()));
             }
         }
-        self.log.note(
-            "stopped_ms",
-            serde_json::json!(detected.elapsed().as_secs_f64() * 1000.0),
-        );
+        let took = detected.elapsed();
+        self.stopped_in = Some(took);
+        self.log
+            .note("stopped_ms", serde_json::json!(took.as_secs_f64() * 1000.0));
         self.log.flush();
         self.tripped = Some(fault.clone());
+    }
+
+    /// How long stopping took, from the fault's detection to both calls answered.
+    pub fn stopped_in(&self) -> Option<std::time::Duration> {
+        self.stopped_in
     }
 
     pub fn tripped(&self) -> Option<&Fault> {

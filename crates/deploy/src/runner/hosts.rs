@@ -42,7 +42,9 @@ impl EpisodeHost for TwinHost {
         let seed = self.seed + index as u64;
         match self.rpc.call("TwinReset", &[Value::Int(seed as i32)])? {
             Value::Int(0) => Ok(()),
-            other => Err(DeployError::Protocol(format!("TwinReset({seed}) answered {other:?}"))),
+            other => Err(DeployError::Protocol(format!(
+                "TwinReset({seed}) answered {other:?}"
+            ))),
         }
     }
 

@@ -10,14 +10,14 @@
 //! fault; nothing moves the arm afterwards ([`GuardedLink`]).
 
 mod estimate;
-mod hosts;
 mod guard;
+mod hosts;
 mod log;
 mod model_io;
 
 pub use estimate::StateEstimator;
-pub use hosts::{OperatorHost, TwinHost};
 pub use guard::{GuardedLink, describe};
+pub use hosts::{OperatorHost, TwinHost};
 pub use log::JsonLog;
 pub use model_io::ModelIo;
 
@@ -85,6 +85,8 @@ pub struct RunReport {
     pub episodes: Vec<EpisodeReport>,
     /// The fault that stopped the arm, if one did.
     pub fault: Option<Fault>,
+    /// From the fault's detection to StopMotion and ServoMoveEnd both answered.
+    pub stopped_in: Option<Duration>,
 }
 
 /// Everything the loop works with.
@@ -193,7 +195,11 @@ impl Deployment {
             self.link.stop(f);
         }
         self.link.log.flush();
-        Ok(RunReport { episodes, fault })
+        Ok(RunReport {
+            episodes,
+            fault,
+            stopped_in: self.link.stopped_in(),
+        })
     }
 
     /// Enables the arm in automatic mode and activates the gripper when needed.

@@ -1,0 +1,174 @@
+//! The deployment loop against the digital twin over the real protocol (XML-RPC, CNDE, the
+//! pose feed): each injected fault stops the arm — StopMotion then ServoMoveEnd, within
+//! 100 ms of detection — ends the run with the fault named, and no motion command follows.
+
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
+use fairgrasp_deploy::pose_source::StreamedPose;
+use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunReport, TwinHost};
+use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::{Twin, TwinConfig, TwinHandle};
+use fairgrasp_rl::policies::Policy;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+fn model_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../rl/tests/data/format1/ppo")
+}
+
+/// Runs the loop against a fresh twin; `fault` (name, value) is injected once the twin has
+/// received `after` ServoJ calls. Returns the report and the twin.
+fn run_with(fault: Option<(&str, &str)>, after: usize, episodes: u32) -> (RunReport, TwinHandle) {
+    let twin = Twin::spawn(TwinConfig::ephemeral()).unwrap();
+    let client = FairinoClient::connect(
+        "127.0.0.1",
+        &ClientConfig {
+            rpc_port: twin.rpc_addr().port(),
+            cnde_port: twin.cnde_addr().port(),
+            ..ClientConfig::default()
+        },
+    )
+    .unwrap();
+    let policy = Policy::load(&model_dir()).unwrap();
+    let calibration = Calibration::identity(&ModelIo::for_policy(&policy).unwrap().limits_rad);
+    let options = DeployOptions {
+        live: true,
+        episodes,
+        max_steps: Some(60),
+        safety: SafetyConfig {
+            speed_scale: 1.0,
+            ..SafetyConfig::default()
+        },
+        ..DeployOptions::default()
+    };
+    let mut deployment = Deployment::new(
+        Box::new(client),
+        policy,
+        calibration,
+        options,
+        JsonLog::create(None).unwrap(),
+        Arc::new(AtomicBool::new(false)),
+    )
+    .unwrap();
+    let mut host = TwinHost::detect(&twin.rpc_addr().to_string(), 1)
+        .unwrap()
+        .expect("the twin says it is one");
+    let mut pose = StreamedPose::tcp(
+        &twin.pose_addr().unwrap().to_string(),
+        Duration::from_secs(1),
+    )
+    .unwrap();
+    let report = std::thread::scope(|s| {
+        let runner = s.spawn(|| deployment.run(&mut host, &mut pose).unwrap());
+        if let Some((name, value)) = fault {
+            let until = Instant::now() + Duration::from_secs(30);
+            while servo_calls(&twin) < after {
+                assert!(Instant::now() < until, "the loop never streamed");
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            twin.inject_text(name, value).unwrap();
+        }
+        runner.join().unwrap()
+    });
+    (report, twin)
+}
+
+fn servo_calls(twin: &TwinHandle) -> usize {
+    twin.calls().iter().filter(|c| c.method == "ServoJ").count()
+}
+
+/// Checks the stop: StopMotion then ServoMoveEnd last, answered within 100 ms of detection,
+/// and nothing that moves afterwards.
+fn check_stopped(report: &RunReport, twin: &TwinHandle, kind: &str) {
+    let fault = report.fault.as_ref().expect("the fault must stop the run");
+    assert_eq!(fault.kind(), kind, "{fault}");
+    let stopped_in = report.stopped_in.expect("stopped");
+    assert!(
+        stopped_in < Duration::from_millis(100),
+        "{fault}: stopping took {stopped_in:?}"
+    );
+    let calls = twin.calls();
+    let stop = calls
+        .iter()
+        .rposition(|c| c.method == "StopMotion")
+        .unwrap_or_else(|| panic!("{fault}: no StopMotion reached the twin"));
+    assert_eq!(
+        calls.get(stop + 1).map(|c| c.method.as_str()),
+        Some("ServoMoveEnd"),
+        "{fault}"
+    );
+    let moving = ["ServoJ", "MoveJ", "MoveL", "MoveGripper", "ServoMoveStart"];
+    if let Some(c) = calls[stop..]
+        .iter()
+        .find(|c| moving.contains(&c.method.as_str()))
+    {
+        panic!("{fault}: {} sent after the stop", c.method);
+    }
+}
+
+#[test]
+fn an_emergency_stop_stops_the_arm() {
+    let (report, twin) = run_with(Some(("estop", "1")), 20, 1);
+    check_stopped(&report, &twin, "emergency_stop");
+    assert!(report.fault.unwrap().to_string().contains("emergency stop"));
+}
+
+#[test]
+fn a_safety_stop_stops_the_arm() {
+    let (report, twin) = run_with(Some(("safety_stop", "1")), 20, 1);
+    check_stopped(&report, &twin, "safety_stop");
+}
+
+#[test]
+fn a_controller_error_code_stops_the_arm_and_is_explained() {
+    let (report, twin) = run_with(Some(("error", "14,2")), 20, 1);
+    check_stopped(&report, &twin, "controller_fault");
+    let text = report.fault.unwrap().to_string();
+    assert!(
+        text.contains("main_code 14") && text.contains("execution failed"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_stalled_stream_stops_the_arm_after_the_deadline() {
+    let (report, twin) = run_with(Some(("stall", "1")), 20, 1);
+    check_stopped(&report, &twin, "stale_state");
+}
+
+#[test]
+fn a_reset_stream_stops_the_arm() {
+    let (report, twin) = run_with(Some(("reset_stream", "1")), 20, 1);
+    check_stopped(&report, &twin, "stream_failed");
+}
+
+#[test]
+fn a_servo_reply_slower_than_the_call_timeout_stops_the_arm() {
+    // ServoJ answers after 1 s; the client's call timeout is 200 ms.
+    let (report, twin) = run_with(Some(("slow", "ServoJ:1000")), 20, 1);
+    check_stopped(&report, &twin, "call_failed");
+    let text = report.fault.unwrap().to_string();
+    assert!(text.contains("ServoJ"), "{text}");
+}
+
+#[test]
+fn without_faults_episodes_run_to_the_end_and_are_judged() {
+    let (report, twin) = run_with(None, 0, 2);
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    assert_eq!(report.episodes.len(), 2);
+    assert!(report.episodes.iter().all(|e| e.success.is_some()));
+    // The twin counts an episode when the next one starts: the first is in its tally, with
+    // the verdict the loop reported.
+    let tally = twin.tally();
+    assert_eq!(tally.episodes, 1);
+    assert_eq!(Some(tally.results[0].success), report.episodes[0].success);
+    // Every ServoJ set point the twin received was accepted.
+    let refused = twin
+        .calls()
+        .iter()
+        .filter(|c| c.method == "ServoJ" && c.reply != serde_json::json!(0))
+        .count();
+    assert_eq!(refused, 0);
+}
