@@ -3,6 +3,7 @@
 
 mod bench;
 mod bench_learning;
+mod commission_cmd;
 mod demo;
 mod deploy_cmd;
 mod env_cmd;
@@ -42,6 +43,10 @@ enum Command {
     Env(env_cmd::EnvCommand),
     /// Run a trained policy on a FAIRINO controller or its digital twin (dry run unless --live).
     Deploy(deploy_cmd::DeployArgs),
+    /// Write a calibration file (joint signs, offsets, soft limits) from readings of the robot.
+    Calibrate(commission_cmd::CalibrateArgs),
+    /// Move each joint a few degrees and back, the operator confirming each direction.
+    JogTest(commission_cmd::JogArgs),
     /// Measure simulator throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -137,6 +142,8 @@ fn main() -> std::process::ExitCode {
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
         Command::Deploy(args) => deploy_cmd::run(&args),
+        Command::Calibrate(args) => commission_cmd::calibrate(&args),
+        Command::JogTest(args) => commission_cmd::jog(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

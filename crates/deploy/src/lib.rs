@@ -13,6 +13,7 @@
 
 pub mod atomic;
 pub mod calibration;
+pub mod commissioning;
 pub mod error;
 pub mod fairino;
 pub mod kinematics;

@@ -38,9 +38,8 @@ impl ModelIo {
         }
         let table = fairgrasp_rl::model::env_table(policy.env_config())?;
         let config: GraspConfig = fairgrasp_env::config::from_table(table)?;
-        let mut env = RescaleAction::new(GraspEnv::new(config)?)?;
-        env.reset(Some(0))?;
-        let inner = env.inner();
+        let io = Self::for_config(config)?;
+        let inner = io.env.inner();
         if inner.observation_space().dim() != policy.obs_dim()
             || inner.action_space().dim() != policy.act_dim()
         {
@@ -56,6 +55,15 @@ impl ModelIo {
                 ),
             ));
         }
+        Ok(io)
+    }
+
+    /// The grasp env with these settings (the robot, its home pose and limits, the table):
+    /// what the commissioning steps need when no model is given.
+    pub fn for_config(config: GraspConfig) -> Result<Self> {
+        let mut env = RescaleAction::new(GraspEnv::new(config)?)?;
+        env.reset(Some(0))?;
+        let inner = env.inner();
         let scene = inner.scene();
         let nominal = inner
             .state()
