@@ -32,7 +32,7 @@ pub fn calibration_from_readings(
         ));
     }
     let mut joints = Vec::with_capacity(6);
-    for i in 0..6 {
+    for (i, &(lo, hi)) in sim_limits_rad.iter().enumerate() {
         let jog = readings.after_jog[i] - readings.at_home[i];
         if !jog.is_finite() || jog.abs() < MIN_JOG_DEG {
             return Err(DeployError::config(
@@ -45,7 +45,6 @@ pub fn calibration_from_readings(
         }
         let sign: i8 = if jog > 0.0 { 1 } else { -1 };
         let offset_deg = readings.at_home[i] - sign as f64 * readings.home_sim_deg[i];
-        let (lo, hi) = sim_limits_rad[i];
         let a = sign as f64 * (lo as f64).to_degrees() + offset_deg;
         let b = sign as f64 * (hi as f64).to_degrees() + offset_deg;
         joints.push(JointCalibration {
