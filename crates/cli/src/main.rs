@@ -8,6 +8,7 @@ mod env_cmd;
 mod eval_cmd;
 mod inspect;
 mod train_cmd;
+mod twin_cmd;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -42,6 +43,8 @@ enum Command {
     /// Measure simulator throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Serve a digital twin of the FAIRINO controller (XML-RPC 20003, CNDE 20005), backed by the simulator.
+    Twin(twin_cmd::TwinArgs),
 }
 
 /// Scene settings shared by the commands that build a scene.
@@ -133,6 +136,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
+        Command::Twin(args) => twin_cmd::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
