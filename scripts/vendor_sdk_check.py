@@ -57,6 +57,7 @@ def main():
     start = time.time()
     err = robot.MoveJ(target, 0, 0, vel=30.0)
     seconds = time.time() - start
+    time.sleep(0.05)  # the SDK reads motion_done from its last CNDE frame (8 ms period)
     reached = robot.GetActualJointPosDegree()[1]
     check(f"MoveJ +10 deg on j1 (blocked {seconds:.2f} s)", err == 0, err)
     check("MoveJ arrived", abs(reached[0] - target[0]) < 1.0, f"j1 = {reached[0]:.2f}")

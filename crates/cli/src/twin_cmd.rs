@@ -86,7 +86,10 @@ fn environment(args: &TwinArgs) -> Result<(String, toml::Table)> {
                 .with_context(|| format!("cannot find a model at {}", path.display()))?;
             let meta = fairgrasp_rl::model::ModelMeta::load(&dir)?;
             let table = fairgrasp_rl::model::env_table(&meta.env).with_context(|| {
-                format!("{}: the environment settings", dir.join("model.json").display())
+                format!(
+                    "{}: the environment settings",
+                    dir.join("model.json").display()
+                )
             })?;
             (Some(meta.env_id), table)
         }
@@ -189,7 +192,10 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     }
     let faults_text: Vec<String> = config.faults.iter().map(|f| f.to_string()).collect();
     let twin = Twin::spawn(config).context("cannot start the twin")?;
-    println!("fairgrasp twin of a FAIRINO controller, staging {}", twin.env_id());
+    println!(
+        "fairgrasp twin of a FAIRINO controller, staging {}",
+        twin.env_id()
+    );
     println!("  XML-RPC      http://{}/RPC2", twin.rpc_addr());
     println!("  CNDE stream  {}", twin.cnde_addr());
     match twin.pose_addr() {
