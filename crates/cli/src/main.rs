@@ -10,6 +10,7 @@ mod env_cmd;
 mod eval_cmd;
 mod inspect;
 mod train_cmd;
+mod twin_cmd;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -50,6 +51,8 @@ enum Command {
     /// Measure simulator throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Serve a digital twin of the FAIRINO controller (XML-RPC 20003, CNDE 20005), backed by the simulator.
+    Twin(twin_cmd::TwinArgs),
 }
 
 /// Scene settings shared by the commands that build a scene.
@@ -144,6 +147,7 @@ fn main() -> std::process::ExitCode {
         Command::Deploy(args) => deploy_cmd::run(&args),
         Command::Calibrate(args) => commission_cmd::calibrate(&args),
         Command::JogTest(args) => commission_cmd::jog(&args),
+        Command::Twin(args) => twin_cmd::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

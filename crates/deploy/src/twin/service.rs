@@ -3,7 +3,9 @@
 //! [module](super) documentation). Every call goes through the injected delays (not the
 //! `Twin…` ones) and into the call log.
 //!
-//! Commands answer an int code; getters a flat array `[code, values…]`, padded with zeros when
+//! A blocking `MoveJ` (`blendT` < 0) answers when the motion has ended (plus two stream
+//! periods, so the CNDE stream already shows it); a blocking `MoveGripper` (`block` = 0) when the
+//! fingers stop. Commands answer an int code; getters a flat array `[code, values…]`, padded with zeros when
 //! the code is not 0. A wrong number of arguments is code 3, an argument of the wrong type or
 //! out of range code 4; an unknown method is an XML-RPC fault (-32601), as from any XML-RPC
 //! server.
@@ -22,6 +24,8 @@ use std::time::Duration;
 const MAX_BLOCK_SECONDS: f64 = 300.0;
 /// How often a waiting call looks at the shutdown flag (s).
 const WAIT_POLL: Duration = Duration::from_millis(50);
+/// How long a blocking MoveJ's reply waits after the motion ended (s).
+const STREAM_CATCH_UP: f64 = 0.016;
 /// The XML-RPC convention's "method not found".
 const FAULT_NO_METHOD: i32 = -32601;
 
@@ -353,11 +357,10 @@ impl TwinService {
                 codes::WAIT_TIMEOUT
             });
         }
-        Ok(self
-            .shared
-            .controller()
-            .outcome(ticket)
-            .unwrap_or(codes::OK))
+        let outcome = self.shared.controller().outcome(ticket);
+        // Two stream periods, so the state stream reports the arrival before the reply does.
+        pause(STREAM_CATCH_UP);
+        Ok(outcome.unwrap_or(codes::OK))
     }
 
     /// `MoveGripper(index, pos, vel, force, maxtime, block, type, rotNum, rotVel, rotTorque)`:

@@ -108,7 +108,20 @@ pub struct EpisodeResult {
     pub grasped: bool,
 }
 
+/// Integral gain of the drives' position loop (1/s).
+const DRIVE_KI: f64 = 4.0;
+/// Largest integral correction (deg).
+const DRIVE_BIAS_MAX: f64 = 0.5;
+/// The integral only learns while the set point moves slower than this (deg/s).
+const DRIVE_LEARN_SPEED: f64 = 5.0;
+
 /// The scene, the task, and the judged episode.
+///
+/// The simulated joints are PD-controlled without gravity compensation, so they sag a few
+/// tenths of a degree below their targets; a real drive's integral action removes that. The
+/// world adds the same: a slow integral term (at most 0.5°, learnt while the set point is nearly
+/// still) to the set points it passes to the simulator, so the joints come to rest where the
+/// controller commands them.
 pub struct World {
     env_id: String,
     inner: Box<dyn TaskScene>,
@@ -116,6 +129,8 @@ pub struct World {
     substeps: u32,
     physics_steps: u64,
     episode: EpisodeResult,
+    drive_bias: [f64; 6],
+    last_setpoint: Option<[f64; 6]>,
 }
 
 impl World {
@@ -147,6 +162,8 @@ impl World {
             substeps,
             physics_steps: 0,
             episode: EpisodeResult::default(),
+            drive_bias: [0.0; 6],
+            last_setpoint: None,
         };
         world.start_episode(seed)?;
         Ok(world)
@@ -185,6 +202,8 @@ impl World {
     /// judged episode.
     pub fn start_episode(&mut self, seed: u64) -> Result<()> {
         self.inner.start_episode(seed)?;
+        self.drive_bias = [0.0; 6];
+        self.last_setpoint = None;
         self.episode = EpisodeResult {
             number: self.episode.number + 1,
             seed,
@@ -201,18 +220,29 @@ impl World {
     /// Applies the set points and advances one physics step; every `substeps` steps the task
     /// judges the state.
     pub fn step(&mut self, setpoint: &Setpoint) -> Result<()> {
+        let dt = self.dt();
+        let sp = setpoint.joints_deg;
         let scene = self.inner.scene_mut();
         let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
-        let q: Vec<f32> = setpoint
-            .joints_deg
-            .iter()
-            .map(|v| v.to_radians() as f32)
+        let q: Vec<f32> = (0..6)
+            .map(|j| (sp[j] + self.drive_bias[j]).to_radians() as f32)
             .collect();
         scene.set_arm_targets(&q).map_err(sim)?;
         let opening = (setpoint.gripper_percent / 100.0) as f32 * scene.max_opening();
         scene.set_gripper_target(opening).map_err(sim)?;
         scene.step_physics().map_err(sim)?;
         self.physics_steps += 1;
+        let still = self
+            .last_setpoint
+            .is_some_and(|last| super::motion::max_gap(&last, &sp) < DRIVE_LEARN_SPEED * dt);
+        if still {
+            let measured = self.measure().joints_deg;
+            for j in 0..6 {
+                self.drive_bias[j] = (self.drive_bias[j] + DRIVE_KI * (sp[j] - measured[j]) * dt)
+                    .clamp(-DRIVE_BIAS_MAX, DRIVE_BIAS_MAX);
+            }
+        }
+        self.last_setpoint = Some(sp);
         if self.physics_steps.is_multiple_of(self.substeps as u64) {
             self.inner.scene().check_finite().map_err(sim)?;
             self.judge();
@@ -320,8 +350,13 @@ mod tests {
         let mut rig = Rig::new(3);
         let home = rig.world.home_deg();
         rig.run(0.5);
+        let sagging = max_gap(&rig.world.measure().joints_deg, &home);
+        rig.run(1.5);
         let m = rig.world.measure();
-        assert!(max_gap(&m.joints_deg, &home) < 1.0, "{m:?}");
+        assert!(
+            max_gap(&m.joints_deg, &home) < 0.02,
+            "{m:?} (sagged {sagging}°)"
+        );
         assert!(
             (m.gripper_percent - 100.0).abs() < 2.0,
             "gripper open at start"
