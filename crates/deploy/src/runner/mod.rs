@@ -191,15 +191,41 @@ impl Deployment {
                 }
             },
         };
-        if let Some(f) = &fault {
-            self.link.stop(f);
-        }
+        let fault = fault.map(|f| {
+            self.link.stop(&f);
+            self.root_cause(f)
+        });
         self.link.log.flush();
         Ok(RunReport {
             episodes,
             fault,
             stopped_in: self.link.stopped_in(),
         })
+    }
+
+    /// A refused call is often the echo of a state the stream had not shown yet (an e-stop, a
+    /// safety stop, a fault code) or of the stream's own failure: once the arm is stopped, look at the stream for up to 50 ms
+    /// and name that state instead.
+    fn root_cause(&mut self, fault: Fault) -> Fault {
+        if !matches!(fault, Fault::CallFailed { .. }) {
+            return fault;
+        }
+        let until = Instant::now() + Duration::from_millis(50);
+        while Instant::now() < until {
+            match self.link.state() {
+                Ok(s) => match self.watchdog.check(&s, Instant::now()) {
+                    Err(
+                        f @ (Fault::EmergencyStop
+                        | Fault::SafetyStop(_)
+                        | Fault::ControllerFault { .. }),
+                    ) => return f,
+                    _ => {}
+                },
+                Err(f) => return f,
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        fault
     }
 
     /// Enables the arm in automatic mode and activates the gripper when needed.
