@@ -213,14 +213,16 @@ impl Deployment {
         let until = Instant::now() + Duration::from_millis(50);
         while Instant::now() < until {
             match self.link.state() {
-                Ok(s) => match self.watchdog.check(&s, Instant::now()) {
-                    Err(
+                Ok(s) => {
+                    if let Err(
                         f @ (Fault::EmergencyStop
                         | Fault::SafetyStop(_)
                         | Fault::ControllerFault { .. }),
-                    ) => return f,
-                    _ => {}
-                },
+                    ) = self.watchdog.check(&s, Instant::now())
+                    {
+                        return f;
+                    }
+                }
                 Err(f) => return f,
             }
             std::thread::sleep(Duration::from_millis(2));
