@@ -249,3 +249,31 @@ fn starting_outside_the_limits_or_with_nan_is_refused() {
     // Not started: nothing is sent.
     assert!(f.next(&arm.home_deg).is_err());
 }
+
+#[test]
+fn joints_move_in_step_along_the_straight_line_to_the_target() {
+    let arm = fr5();
+    let config = SafetyConfig {
+        speed_scale: 0.25,
+        ..SafetyConfig::default()
+    };
+    let mut f = filter(&arm, &config);
+    f.start(&arm.home_deg).unwrap();
+    let mut target = arm.home_deg;
+    let delta = [12.0, -6.0, 9.0, 3.0, -1.0, 20.0];
+    for i in 0..6 {
+        target[i] += delta[i];
+    }
+    for _ in 0..400 {
+        let q = f.next(&target).unwrap();
+        // The share of the way covered is the same for every joint.
+        let share: Vec<f64> = (0..6)
+            .map(|i| (q[i] - arm.home_deg[i]) / delta[i])
+            .collect();
+        for s in &share {
+            assert!((s - share[0]).abs() < 1e-9, "{share:?}");
+        }
+    }
+    let q = f.next(&target).unwrap();
+    assert!((0..6).all(|i| (q[i] - target[i]).abs() < 1e-9));
+}
