@@ -12,6 +12,7 @@
 //! - [`export`]: ONNX and safetensors files of a trained policy.
 
 pub mod error;
+pub mod export;
 pub mod pose_source;
 pub mod robot;
 
