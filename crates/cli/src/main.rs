@@ -8,6 +8,7 @@ mod demo;
 mod deploy_cmd;
 mod env_cmd;
 mod eval_cmd;
+mod export_cmd;
 mod inspect;
 mod train_cmd;
 mod twin_cmd;
@@ -39,6 +40,8 @@ enum Command {
     Train(train_cmd::TrainArgs),
     /// Evaluate a saved model on held-out episodes (success rate, mean return and length).
     Eval(eval_cmd::EvalArgs),
+    /// Export a saved model as ONNX (raw observation → action) or standalone safetensors.
+    Export(export_cmd::ExportArgs),
     /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
     #[command(subcommand)]
     Env(env_cmd::EnvCommand),
@@ -142,6 +145,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(command) => demo::run(command),
         Command::Train(args) => train_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
+        Command::Export(args) => export_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
         Command::Deploy(args) => deploy_cmd::run(&args),

@@ -319,3 +319,60 @@ fn env_commands_take_any_registered_id() {
     ]));
     assert!(stderr.contains("num_bins"), "{stderr}");
 }
+
+#[test]
+fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_them() {
+    use fairgrasp_rl::algorithm::Algorithm;
+    use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, save_model};
+    use fairgrasp_rl::ppo::{Ppo, PpoConfig};
+    let config = PpoConfig {
+        net_arch: vec![8],
+        ..PpoConfig::default()
+    };
+    let ppo = Ppo::new(config.clone(), 3, 1, 1, 0).unwrap();
+    let meta = ModelMeta {
+        format_version: FORMAT_VERSION,
+        algo: "ppo".into(),
+        obs_dim: 3,
+        act_dim: 1,
+        ppo: Some(config),
+        sac: None,
+        env_id: "Pendulum-v1".into(),
+        env: serde_json::json!({}),
+        normalization: None,
+        num_timesteps: 0,
+        train_seed: 0,
+        n_envs: 1,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("model");
+    save_model(&model, &ppo.weights().unwrap(), &meta).unwrap();
+    let model_arg = model.to_str().unwrap();
+    for (format, file, hint) in [
+        ("onnx", "policy.onnx", "onnxruntime"),
+        ("safetensors", "policy.safetensors", "safe_open"),
+    ] {
+        let out = fairgrasp(&["export", "--model", model_arg, "--format", format]);
+        let (stdout, stderr) = text(&out);
+        assert!(out.status.success(), "{stderr}");
+        let path = model.join(file);
+        assert!(path.is_file(), "{stdout}");
+        assert!(
+            stdout.contains(&format!("wrote {}", path.display())) && stdout.contains(hint),
+            "{stdout}"
+        );
+    }
+    let out = fairgrasp(&["export", "--model", model_arg, "--format", "pytorch"]);
+    assert!(!out.status.success());
+    assert!(text(&out).1.contains("pytorch"), "{}", text(&out).1);
+    let missing = dir.path().join("nothing-here");
+    let out = fairgrasp(&[
+        "export",
+        "--model",
+        missing.to_str().unwrap(),
+        "--format",
+        "onnx",
+    ]);
+    assert!(!out.status.success());
+    assert!(text(&out).1.contains("nothing-here"), "{}", text(&out).1);
+}

@@ -15,6 +15,7 @@ pub mod atomic;
 pub mod calibration;
 pub mod commissioning;
 pub mod error;
+pub mod export;
 pub mod fairino;
 pub mod kinematics;
 pub mod pose_source;

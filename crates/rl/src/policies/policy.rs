@@ -1,7 +1,7 @@
 //! [`Policy`]: a saved model acting on raw observations, without its learner (no optimiser,
 //! no replay buffer, no critics).
 
-use crate::algorithm::{TensorMap, load_varmap};
+use crate::algorithm::{TensorMap, load_varmap, varmap_tensors};
 use crate::error::{Result, RlError};
 use crate::model::{ModelMeta, load_tensors, resolve_model_dir};
 use crate::policies::actor_critic::ActorCritic;
@@ -164,6 +164,22 @@ impl Policy {
     /// Restarts the stream of stochastic actions from `seed`.
     pub fn set_seed(&mut self, seed: u64) {
         self.rng = ChaCha8Rng::seed_from_u64(seed);
+    }
+
+    /// The observation normalisation statistics [`Self::act`] applies, if the model was trained
+    /// on normalised observations.
+    pub fn normalization(&self) -> Option<&VecNormalizeState> {
+        self.normalization.as_ref()
+    }
+
+    /// The parameters of the networks that act, by their names in `model.safetensors` (PPO:
+    /// `pi.*`, `vf.*` and `log_std`; SAC: `actor.*`), for exporters that rebuild the actor
+    /// elsewhere.
+    pub fn actor_tensors(&self) -> TensorMap {
+        match &self.actor {
+            Actor::Ppo(policy) => varmap_tensors(&policy.varmap, ""),
+            Actor::Sac(actor) => varmap_tensors(&actor.varmap, ""),
+        }
     }
 
     /// The model's description (`model.json`).

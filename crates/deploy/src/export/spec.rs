@@ -1,0 +1,254 @@
+//! What an exported policy holds, read once from a [`Policy`]: the observation normalisation,
+//! the actor's dense layers up to the deterministic action, and the affine map from that action
+//! to what the environment receives. Both file formats are written from this.
+
+use crate::error::{DeployError, Result};
+use candle_core::Tensor;
+use fairgrasp_env::Env;
+use fairgrasp_env::wrappers::RescaleAction;
+use fairgrasp_rl::nn::Activation;
+use fairgrasp_rl::policies::{FeaturesConfig, Policy};
+
+/// `clip((obs − mean) / sqrt(var + epsilon), ±clip)`, computed in f64 as
+/// [`fairgrasp_env::wrappers::VecNormalizeState::normalize_obs`] does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObsNormalization {
+    pub mean: Vec<f64>,
+    pub var: Vec<f64>,
+    pub epsilon: f64,
+    pub clip: f64,
+}
+
+impl ObsNormalization {
+    /// `sqrt(var + epsilon)` per observation value: what the centred observation is divided by.
+    pub fn scale(&self) -> Vec<f64> {
+        self.var.iter().map(|v| (v + self.epsilon).sqrt()).collect()
+    }
+}
+
+/// One fully connected layer: `y = x Wᵀ + b`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dense {
+    /// The layer's name in `model.safetensors` (`pi.l0`, `actor.l2`).
+    pub name: String,
+    pub inputs: usize,
+    pub outputs: usize,
+    /// `outputs × inputs`, row-major (PyTorch's and candle's layout).
+    pub weight: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+/// What turns the last layer's output into the deterministic action.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Head {
+    /// PPO: the Gaussian's mean, as it is.
+    Mean,
+    /// SAC: the squashed Gaussian's mode, `tanh(mean)`.
+    TanhMean,
+}
+
+/// The environment's own action box, onto which `[-1, 1]` is mapped (the trainer's
+/// [`RescaleAction`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ActionBox {
+    pub low: Vec<f32>,
+    pub high: Vec<f32>,
+}
+
+/// Everything an exported policy file holds.
+#[derive(Clone, Debug)]
+pub struct PolicySpec {
+    pub env_id: String,
+    pub env_config: serde_json::Value,
+    /// `ppo` or `sac`.
+    pub algo: String,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    pub num_timesteps: u64,
+    /// `None` when the model acts on raw observations.
+    pub normalization: Option<ObsNormalization>,
+    /// In order from the observation; an activation follows every layer but the last.
+    pub layers: Vec<Dense>,
+    pub activation: Activation,
+    pub head: Head,
+    pub env_action: ActionBox,
+    /// What each action value means, in words.
+    pub action_layout: String,
+}
+
+impl PolicySpec {
+    /// Reads `policy`'s networks, statistics and environment. The environment is built once
+    /// through the registry for its action box; an unknown environment or settings the
+    /// registry refuses are errors.
+    pub fn from_policy(policy: &Policy) -> Result<Self> {
+        let meta = policy.meta();
+        let fail = |message: String| DeployError::config(model_name(policy), message);
+        let (prefix, net_arch, activation, features, head) = match meta.algo.as_str() {
+            "ppo" => {
+                let c = meta
+                    .ppo
+                    .as_ref()
+                    .ok_or_else(|| fail("no ppo settings".into()))?;
+                ("pi", &c.net_arch, c.activation, &c.features, Head::Mean)
+            }
+            "sac" => {
+                let c = meta
+                    .sac
+                    .as_ref()
+                    .ok_or_else(|| fail("no sac settings".into()))?;
+                (
+                    "actor",
+                    &c.net_arch,
+                    c.activation,
+                    &c.features,
+                    Head::TanhMean,
+                )
+            }
+            other => return Err(fail(format!("cannot export algorithm `{other}`"))),
+        };
+        // The flatten extractor is the identity on flat observations. A new extractor must be
+        // added to the exported graph before this match compiles again.
+        match features {
+            FeaturesConfig::Flatten {} => {}
+        }
+        let tensors = policy.actor_tensors();
+        let mut layers = Vec::with_capacity(net_arch.len() + 1);
+        for i in 0..=net_arch.len() {
+            let name = format!("{prefix}.l{i}");
+            let get = |part: &str| {
+                tensors
+                    .get(&format!("{name}.{part}"))
+                    .ok_or_else(|| fail(format!("the actor has no tensor `{name}.{part}`")))
+            };
+            let (outputs, inputs) = get("weight")?
+                .dims2()
+                .map_err(|e| fail(format!("`{name}.weight`: {e}")))?;
+            let mut layer = Dense {
+                weight: values(get("weight")?).map_err(|e| fail(format!("{name}: {e}")))?,
+                bias: values(get("bias")?).map_err(|e| fail(format!("{name}: {e}")))?,
+                name,
+                inputs,
+                outputs,
+            };
+            if i == net_arch.len() && head == Head::TanhMean {
+                // SAC's last layer gives the means, then the log standard deviations, which a
+                // deterministic action does not use.
+                layer.outputs = meta.act_dim;
+                layer.weight.truncate(meta.act_dim * inputs);
+                layer.bias.truncate(meta.act_dim);
+            }
+            layers.push(layer);
+        }
+        check_chain(&layers, meta.obs_dim, meta.act_dim).map_err(fail)?;
+        let normalization = policy
+            .normalization()
+            .filter(|n| n.config.norm_obs)
+            .map(|n| ObsNormalization {
+                mean: n.obs_rms.mean().to_vec(),
+                var: n.obs_rms.var().to_vec(),
+                epsilon: n.config.epsilon,
+                clip: n.config.clip_obs as f64,
+            });
+        let (env_action, action_layout) = environment_actions(policy).map_err(fail)?;
+        Ok(Self {
+            env_id: meta.env_id.clone(),
+            env_config: meta.env.clone(),
+            algo: meta.algo.clone(),
+            obs_dim: meta.obs_dim,
+            act_dim: meta.act_dim,
+            num_timesteps: meta.num_timesteps,
+            normalization,
+            layers,
+            activation,
+            head,
+            env_action,
+            action_layout,
+        })
+    }
+}
+
+/// How errors name the policy: its directory, or `policy` for one built in memory.
+pub(crate) fn model_name(policy: &Policy) -> String {
+    policy
+        .dir()
+        .map(|d| d.display().to_string())
+        .unwrap_or_else(|| "policy".into())
+}
+
+/// A tensor's values as f32, row-major.
+fn values(t: &Tensor) -> candle_core::Result<Vec<f32>> {
+    t.to_dtype(candle_core::DType::F32)?
+        .flatten_all()?
+        .to_vec1()
+}
+
+/// Errors unless each layer feeds the next, from `obs_dim` values to `act_dim`.
+fn check_chain(layers: &[Dense], obs_dim: usize, act_dim: usize) -> Result<(), String> {
+    let mut width = obs_dim;
+    for layer in layers {
+        if layer.inputs != width
+            || layer.weight.len() != layer.inputs * layer.outputs
+            || layer.bias.len() != layer.outputs
+        {
+            return Err(format!(
+                "layer `{}` takes {} values to {} ({} weights, {} biases); expected {width} inputs",
+                layer.name,
+                layer.inputs,
+                layer.outputs,
+                layer.weight.len(),
+                layer.bias.len()
+            ));
+        }
+        width = layer.outputs;
+    }
+    if width != act_dim {
+        return Err(format!(
+            "the actor gives {width} values, the model has {act_dim} actions"
+        ));
+    }
+    Ok(())
+}
+
+/// The environment's action box (as the trainer's [`RescaleAction`] sees it) and the action
+/// layout in words.
+fn environment_actions(policy: &Policy) -> Result<(ActionBox, String), String> {
+    let id = policy.env_id();
+    let table = fairgrasp_rl::model::env_table(policy.env_config()).map_err(|e| e.to_string())?;
+    let built = fairgrasp_env::registry::make(id, &table)
+        .and_then(RescaleAction::new)
+        .map_err(|e| format!("cannot build its environment {id}: {e}"))?;
+    let space = built.inner().action_space();
+    if space.dim() != policy.act_dim() {
+        return Err(format!(
+            "environment {id} takes {} action values, the model gives {}",
+            space.dim(),
+            policy.act_dim()
+        ));
+    }
+    let mode = fairgrasp_env::registry::effective_config(id, &table)
+        .ok()
+        .and_then(|c| {
+            c.get("control")?
+                .get("action_mode")?
+                .as_str()
+                .map(String::from)
+        });
+    let n = policy.act_dim();
+    let layout = match mode.as_deref() {
+        Some("joint") => format!(
+            "joint: {} joint-angle deltas (rad), then the gripper command (> 0 opens)",
+            n - 1
+        ),
+        Some("cartesian") => {
+            "cartesian: TCP dx, dy, dz (m) and dyaw (rad), then the gripper command (> 0 opens)"
+                .into()
+        }
+        _ if n == 1 => "one value in the environment's action box".into(),
+        _ => format!("{n} values in the environment's action box"),
+    };
+    let action_box = ActionBox {
+        low: space.low.clone(),
+        high: space.high.clone(),
+    };
+    Ok((action_box, layout))
+}
