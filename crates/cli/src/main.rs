@@ -7,6 +7,7 @@ mod demo;
 mod env_cmd;
 mod eval_cmd;
 mod inspect;
+mod robustness_cmd;
 mod train_cmd;
 
 use anyhow::{Context, Result};
@@ -36,6 +37,9 @@ enum Command {
     Train(train_cmd::TrainArgs),
     /// Evaluate a saved model on held-out episodes (success rate, mean return and length).
     Eval(eval_cmd::EvalArgs),
+    /// Evaluate a saved model over a grid of held-out conditions (mass, friction, latency,
+    /// observation noise, joint offsets).
+    Robustness(robustness_cmd::RobustnessArgs),
     /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
     #[command(subcommand)]
     Env(env_cmd::EnvCommand),
@@ -131,6 +135,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(command) => demo::run(command),
         Command::Train(args) => train_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
+        Command::Robustness(args) => robustness_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
     };

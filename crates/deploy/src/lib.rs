@@ -10,10 +10,12 @@
 //! - [`calibration`]: simulator joints ↔ robot joints.
 //! - [`pose_source`]: where the object's pose comes from on the real arm.
 //! - [`export`]: ONNX and safetensors files of a trained policy.
+//! - [`robustness`]: a policy's success over a grid of held-out conditions.
 
 pub mod error;
 pub mod pose_source;
 pub mod robot;
+pub mod robustness;
 
 pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};
 
