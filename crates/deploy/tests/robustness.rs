@@ -232,3 +232,27 @@ fn tasks_without_randomisation_are_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn a_noise_condition_perturbs_positions_only_by_about_its_sigma() {
+    let base: toml::Table = toml::from_str(&env_config().to_toml_string()).unwrap();
+    let nominal = nominal_of(ENV_ID, &base).unwrap();
+    let first_obs = |c: &Condition| {
+        let table = condition_table(ENV_ID, &base, &nominal, c).unwrap();
+        let mut env = fairgrasp_env::registry::make(ENV_ID, &table).unwrap();
+        env.reset(Some(7)).unwrap().0
+    };
+    let exact = first_obs(&Condition::nominal(&nominal));
+    let noisy = first_obs(&Condition::nominal(&nominal).with(Axis::Noise, 5.0));
+    // `rich` layout: joints 0..12 (angles, velocities), TCP position 12..15, orientation
+    // 15..21, object position 21..24, yaw features 24..26, TCP→object 26..29, lift 29.
+    assert_eq!(&noisy[..12], &exact[..12]);
+    assert_eq!(&noisy[15..21], &exact[15..21]);
+    let diffs: Vec<f32> = [12..15, 21..24, 26..30]
+        .into_iter()
+        .flatten()
+        .map(|i| noisy[i] - exact[i])
+        .collect();
+    let rms = (diffs.iter().map(|d| d * d).sum::<f32>() / diffs.len() as f32).sqrt();
+    assert!(rms > 0.002 && rms < 0.010, "rms {rms} from {diffs:?}");
+}

@@ -45,6 +45,7 @@ impl Axis {
         match self {
             Axis::Mass => format!("×{v}"),
             Axis::Friction => format!("{v}"),
+            Axis::Latency if v == 1.0 => "1 step".into(),
             Axis::Latency => format!("{v} steps"),
             Axis::Noise => format!("{v} mm"),
             Axis::JointOffset => format!("{v}°"),
