@@ -10,6 +10,7 @@ mod env_cmd;
 mod eval_cmd;
 mod export_cmd;
 mod inspect;
+mod robustness_cmd;
 mod train_cmd;
 mod twin_cmd;
 
@@ -42,6 +43,9 @@ enum Command {
     Eval(eval_cmd::EvalArgs),
     /// Export a saved model as ONNX (raw observation → action) or standalone safetensors.
     Export(export_cmd::ExportArgs),
+    /// Evaluate a saved model over a grid of held-out conditions (mass, friction, latency,
+    /// observation noise, joint offsets).
+    Robustness(robustness_cmd::RobustnessArgs),
     /// Check, exercise and measure the grasp environment (FaArmGrasp-v0).
     #[command(subcommand)]
     Env(env_cmd::EnvCommand),
@@ -146,6 +150,7 @@ fn main() -> std::process::ExitCode {
         Command::Train(args) => train_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Export(args) => export_cmd::run(&args),
+        Command::Robustness(args) => robustness_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),
         Command::Bench(command) => bench::run(command),
         Command::Deploy(args) => deploy_cmd::run(&args),

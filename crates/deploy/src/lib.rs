@@ -10,6 +10,7 @@
 //! - [`calibration`]: simulator joints ↔ robot joints.
 //! - [`pose_source`]: where the object's pose comes from on the real arm.
 //! - [`export`]: ONNX and safetensors files of a trained policy.
+//! - [`robustness`]: a policy's success over a grid of held-out conditions.
 
 pub mod atomic;
 pub mod calibration;
@@ -20,6 +21,7 @@ pub mod fairino;
 pub mod kinematics;
 pub mod pose_source;
 pub mod robot;
+pub mod robustness;
 pub mod runner;
 pub mod safety;
 pub mod twin;

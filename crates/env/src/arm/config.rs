@@ -81,12 +81,22 @@ pub struct RandomizationConfig {
     pub object_scale: [f32; 2],
     /// Viscous damping of each arm joint (N·m·s/rad).
     pub joint_damping: [f32; 2],
+    /// When set, each arm joint's damping is its robot description's value times a factor
+    /// drawn from this range, instead of a value drawn from `joint_damping` (`[1.0, 1.0]` pins
+    /// the nominal damping).
+    pub joint_damping_scale: Option<[f32; 2]>,
     /// Factor on the arm's PD gains.
     pub actuator_gain_scale: [f32; 2],
-    /// Actions reach the robot 0…N control steps late (N drawn per episode).
+    /// Actions reach the robot `min_latency_steps…max_latency_steps` control steps late (drawn
+    /// per episode).
+    pub min_latency_steps: u32,
     pub max_latency_steps: u32,
     /// Uniform offset added to each home joint angle (± rad).
     pub initial_joint_jitter: f32,
+    /// Joint calibration error (± rad, drawn uniformly per joint per episode): the encoders
+    /// report `q + e` and the controller servoes the reported angles to its targets. See
+    /// [`crate::arm::ArmEnv`] for what the model includes.
+    pub joint_offset: f32,
     pub observation_noise: ObservationNoise,
 }
 
@@ -98,9 +108,12 @@ impl Default for RandomizationConfig {
             object_friction: [0.5, 1.5],
             object_scale: [0.9, 1.1],
             joint_damping: [0.1, 1.0],
+            joint_damping_scale: None,
             actuator_gain_scale: [0.8, 1.2],
+            min_latency_steps: 0,
             max_latency_steps: 2,
             initial_joint_jitter: 0.05,
+            joint_offset: 0.0,
             observation_noise: ObservationNoise::default(),
         }
     }
@@ -122,6 +135,9 @@ impl RandomizationConfig {
             0.0,
             100.0,
         )?;
+        if let Some(scale) = self.joint_damping_scale {
+            check_range("randomization.joint_damping_scale", scale, 0.0, 100.0)?;
+        }
         check_range(
             "randomization.actuator_gain_scale",
             self.actuator_gain_scale,
@@ -134,10 +150,27 @@ impl RandomizationConfig {
                 "must be at most 10",
             ));
         }
+        if self.min_latency_steps > self.max_latency_steps {
+            return Err(EnvError::config(
+                "randomization.min_latency_steps",
+                format!(
+                    "must be at most randomization.max_latency_steps ({})",
+                    self.max_latency_steps
+                ),
+            ));
+        }
         check_non_negative(
             "randomization.initial_joint_jitter",
             self.initial_joint_jitter,
         )?;
+        check_non_negative("randomization.joint_offset", self.joint_offset)?;
+        // 0.1 rad (5.7°) is a gross miscalibration, not a calibration error.
+        if self.joint_offset > 0.1 {
+            return Err(EnvError::config(
+                "randomization.joint_offset",
+                format!("must be at most 0.1 rad, got {}", self.joint_offset),
+            ));
+        }
         let n = &self.observation_noise;
         for (key, v) in [
             ("joint_position", n.joint_position),

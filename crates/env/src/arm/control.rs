@@ -167,6 +167,13 @@ impl ActionMapper {
         BoxSpace::new(low, high)
     }
 
+    /// The TCP pose (arm base frame) at joint angles `q` by the kinematic model: what a
+    /// controller reports for the angles its encoders read.
+    pub fn forward(&self, q: &[f32]) -> Isometry3<f64> {
+        let q: Vec<f64> = q.iter().map(|&v| v as f64).collect();
+        self.chain.forward(&q)
+    }
+
     /// What the action's values mean, for error messages.
     pub fn layout(&self) -> String {
         match self.config.action_mode {

@@ -89,24 +89,63 @@ pub trait Task: Send + Sized + 'static {
 struct Episode {
     steps: u32,
     done: bool,
+    /// In the controller's joint coordinates (the reported ones).
     command: Command,
     /// Actions waiting to reach the robot (control latency).
     pending: VecDeque<Vec<f32>>,
+    /// The true state.
     state: ArmState,
+    /// This episode's joint calibration errors (rad; empty when none are drawn).
+    joint_offset: Vec<f32>,
+    /// The state as the controller reports it, when it differs from the true one.
+    reported: Option<ArmState>,
     last_obs: Vec<f32>,
 }
 
+impl Episode {
+    /// What the policy and the action mapping see.
+    fn reported_state(&self) -> &ArmState {
+        self.reported.as_ref().unwrap_or(&self.state)
+    }
+}
+
 /// An arm task as a Gymnasium-style environment.
+///
+/// **Joint calibration error** (`randomization.joint_offset`): each episode draws an offset
+/// `e` per joint; the encoders report `q + e`, and the controller drives the *reported* angles
+/// to its targets (the physical targets are the commanded ones minus `e`). The policy and the
+/// action mapping see the reported joints and the TCP pose computed from them by the
+/// kinematic model (as a controller computes it), while the object's pose, coming from
+/// perception in the base frame, is true; rewards and success are judged on the true state.
+/// Left out: the TCP velocity and the joint velocities stay the true ones (an offset of a
+/// degree changes the Jacobian by a few percent), the home pose is the true one (the reported
+/// home is off by `e`), and the offsets are constant over the episode (no drift, no backlash).
 pub struct ArmEnv<T: Task> {
     config: ArmEnvConfig<T::Settings, T::Reward>,
     scene: Scene,
     task: T,
     mapper: ActionMapper,
+    /// The robot description's damping of each arm joint (N·m·s/rad).
+    nominal_damping: Vec<f32>,
     rng: ChaCha8Rng,
     observation_space: BoxSpace,
     action_space: BoxSpace,
     noise_groups: Vec<(Range<usize>, NoiseGroup)>,
     episode: Option<Episode>,
+}
+
+/// The controller's view of `state` under joint offsets `offset`: reported joints and the TCP
+/// pose the kinematic model gives for them. `None` when there are no offsets.
+fn reported(mapper: &ActionMapper, state: &ArmState, offset: &[f32]) -> Option<ArmState> {
+    if offset.is_empty() {
+        return None;
+    }
+    let mut reported = state.clone();
+    for (q, e) in reported.q.iter_mut().zip(offset) {
+        *q += e;
+    }
+    reported.tcp = mapper.forward(&reported.q);
+    Some(reported)
 }
 
 fn gaussian(rng: &mut impl Rng) -> f32 {
@@ -130,6 +169,17 @@ impl<T: Task> ArmEnv<T> {
         let mapper = ActionMapper::new(config.control.clone(), chain, scene.arm_limits())?;
         let task = T::new(&config, &scene)?;
         let action_space = mapper.action_space();
+        let robot = scene.robot();
+        let nominal_damping = scene
+            .arm_joint_names()
+            .iter()
+            .map(|name| {
+                let j = robot
+                    .joint_index(name)
+                    .expect("arm joints are robot joints");
+                robot.model.joints[robot.joints[j].model_index].damping as f32
+            })
+            .collect();
         // Write one observation to learn its length and noise groups.
         let state = ArmState::from_scene(&scene);
         let (mut obs, mut noise_groups) = (Vec::new(), Vec::new());
@@ -144,6 +194,7 @@ impl<T: Task> ArmEnv<T> {
             noise_groups,
             action_space,
             mapper,
+            nominal_damping,
             task,
             rng: ChaCha8Rng::seed_from_u64(0),
             scene,
@@ -171,7 +222,7 @@ impl<T: Task> ArmEnv<T> {
         &self.mapper
     }
 
-    /// The state the last observation was computed from.
+    /// The true state at the last reset or step.
     pub fn state(&self) -> Option<&ArmState> {
         self.episode.as_ref().map(|e| &e.state)
     }
@@ -186,7 +237,22 @@ impl<T: Task> ArmEnv<T> {
         obs
     }
 
-    /// What the arm is currently commanded to do.
+    /// The state as the controller reports it, which the last observation was computed from:
+    /// [`Self::state`] unless joint offsets are drawn (see [`ArmEnv`]).
+    pub fn reported_state(&self) -> Option<&ArmState> {
+        self.episode.as_ref().map(Episode::reported_state)
+    }
+
+    /// This episode's joint calibration errors (rad; empty when none are drawn).
+    pub fn joint_offset(&self) -> &[f32] {
+        self.episode
+            .as_ref()
+            .map(|e| e.joint_offset.as_slice())
+            .unwrap_or(&[])
+    }
+
+    /// What the arm is currently commanded to do (joint targets in the controller's reported
+    /// coordinates).
     pub fn command(&self) -> Option<&Command> {
         self.episode.as_ref().map(|e| &e.command)
     }
@@ -202,10 +268,15 @@ impl<T: Task> ArmEnv<T> {
         let mut latency = 0;
         if d.enabled {
             let damping: Vec<f32> = (0..dof)
-                .map(|_| uniform(&mut self.rng, d.joint_damping))
+                .map(|j| match d.joint_damping_scale {
+                    Some(scale) => self.nominal_damping[j] * uniform(&mut self.rng, scale),
+                    None => uniform(&mut self.rng, d.joint_damping),
+                })
                 .collect();
             params.gain_scale = uniform(&mut self.rng, d.actuator_gain_scale);
-            latency = self.rng.random_range(0..=d.max_latency_steps);
+            latency = self
+                .rng
+                .random_range(d.min_latency_steps..=d.max_latency_steps);
             jitter = (0..dof)
                 .map(|_| (self.rng.random::<f32>() * 2.0 - 1.0) * d.initial_joint_jitter)
                 .collect();
@@ -239,6 +310,23 @@ impl<T: Task> ArmEnv<T> {
             self.scene.set_object_params(i, &shape, mass, friction)?;
         }
         Ok((latency, report))
+    }
+
+    /// Draws this episode's joint calibration errors (none unless randomisation is on and
+    /// `joint_offset` > 0, so other settings draw exactly as before) and reports them.
+    fn draw_joint_offset(&mut self, report: &mut NamedValues) -> Vec<f32> {
+        let d = &self.config.randomization;
+        if !d.enabled || d.joint_offset <= 0.0 {
+            return Vec::new();
+        }
+        let range = [-d.joint_offset, d.joint_offset];
+        let offset: Vec<f32> = (0..self.scene.arm_dof())
+            .map(|_| uniform(&mut self.rng, range))
+            .collect();
+        for (j, v) in offset.iter().enumerate() {
+            report.set(format!("param/joint_offset_{j}"), *v);
+        }
+        offset
     }
 
     fn add_noise(&mut self, obs: &mut [f32]) {
@@ -348,13 +436,21 @@ impl<T: Task> Env for ArmEnv<T> {
         if let Some(seed) = seed {
             self.rng = ChaCha8Rng::seed_from_u64(seed);
         }
-        let (latency, params) = self.randomize()?;
+        let (latency, mut params) = self.randomize()?;
         self.task
             .initialize_episode(&mut self.scene, &mut self.rng)?;
+        // Drawn after the placement, so that offsets leave the episode's layout unchanged.
+        let joint_offset = self.draw_joint_offset(&mut params);
         let state = ArmState::from_scene(&self.scene);
-        let command = self.mapper.hold(&state, self.scene.arm_targets());
+        let reported = reported(&self.mapper, &state, &joint_offset);
+        let view = reported.as_ref().unwrap_or(&state);
+        let mut targets = self.scene.arm_targets();
+        for (t, e) in targets.iter_mut().zip(&joint_offset) {
+            *t += e;
+        }
+        let command = self.mapper.hold(view, targets);
         let previous_action = vec![0.0; self.action_space.dim()];
-        let obs = self.observe(&state, &previous_action);
+        let obs = self.observe(view, &previous_action);
         let no_op = self.no_op_action();
         self.episode = Some(Episode {
             steps: 0,
@@ -362,6 +458,8 @@ impl<T: Task> Env for ArmEnv<T> {
             command,
             pending: std::iter::repeat_n(no_op, latency as usize).collect(),
             state,
+            joint_offset,
+            reported,
             last_obs: obs.clone(),
         });
         Ok((
@@ -392,13 +490,22 @@ impl<T: Task> Env for ArmEnv<T> {
         // Control latency: the action applied now was chosen `latency` steps ago.
         episode.pending.push_back(clipped);
         let applied = episode.pending.pop_front().expect("just pushed");
+        let view = episode.reported.as_ref().unwrap_or(&episode.state);
         if let Some(MappingEvent::IkFailed) =
-            self.mapper
-                .apply(&episode.state, &applied, &mut episode.command)
+            self.mapper.apply(view, &applied, &mut episode.command)
         {
             events.push(EpisodeEvent::IkFailed);
         }
-        self.scene.set_arm_targets(&episode.command.arm_target)?;
+        if episode.joint_offset.is_empty() {
+            self.scene.set_arm_targets(&episode.command.arm_target)?;
+        } else {
+            // The controller servoes the reported angles (q + e) to its targets.
+            let physical: Vec<f32> = (episode.command.arm_target.iter())
+                .zip(&episode.joint_offset)
+                .map(|(t, e)| t - e)
+                .collect();
+            self.scene.set_arm_targets(&physical)?;
+        }
         self.scene.set_gripper_open(episode.command.gripper_open)?;
         match self.scene.step_control() {
             Ok(()) => {}
@@ -412,7 +519,8 @@ impl<T: Task> Env for ArmEnv<T> {
             .map(|(a, h)| a / h)
             .collect();
         let state = ArmState::from_scene(&self.scene);
-        let obs = self.observe(&state, &normalised);
+        let reported = reported(&self.mapper, &state, &episode.joint_offset);
+        let obs = self.observe(reported.as_ref().unwrap_or(&state), &normalised);
         if obs.iter().any(|v| !v.is_finite()) {
             return Ok(self.non_finite_step());
         }
@@ -427,6 +535,7 @@ impl<T: Task> Env for ArmEnv<T> {
         episode.done = terminated || truncated;
         episode.last_obs.clone_from(&obs);
         episode.state = state;
+        episode.reported = reported;
         events.extend(evaluation.failure);
         Ok(Step {
             obs,
