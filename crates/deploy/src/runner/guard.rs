@@ -31,10 +31,6 @@ impl GuardedLink {
         }
     }
 
-    pub fn live(&self) -> bool {
-        self.live
-    }
-
     /// The newest state, logged once per new report.
     pub fn state(&mut self) -> Result<StampedState, Fault> {
         let s = self
@@ -102,33 +98,26 @@ impl GuardedLink {
     pub fn stopped_in(&self) -> Option<std::time::Duration> {
         self.stopped_in
     }
-
-    pub fn tripped(&self) -> Option<&Fault> {
-        self.tripped.as_ref()
-    }
 }
 
 /// One line for the operator.
 pub fn describe(command: &RobotCommand) -> String {
+    let joints = |q: &[f64; 6], decimals: usize| {
+        q.iter()
+            .map(|v| format!("{v:.decimals$}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     match command {
-        RobotCommand::ServoJ { joints_deg, cmd_t } => format!(
-            "ServoJ [{}] deg, cmdT {cmd_t} s",
-            joints_deg
-                .iter()
-                .map(|v| format!("{v:.3}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
+        RobotCommand::ServoJ { joints_deg, cmd_t } => {
+            format!("ServoJ [{}] deg, cmdT {cmd_t} s", joints(joints_deg, 3))
+        }
         RobotCommand::MoveJ {
             joints_deg,
             speed_percent,
         } => format!(
             "MoveJ [{}] deg at {speed_percent:.0} %",
-            joints_deg
-                .iter()
-                .map(|v| format!("{v:.2}"))
-                .collect::<Vec<_>>()
-                .join(", ")
+            joints(joints_deg, 2)
         ),
         other => format!("{other:?}"),
     }
