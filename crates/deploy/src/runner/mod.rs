@@ -3,8 +3,11 @@
 //!
 //! Each control step: read the newest state (the [`Watchdog`] judges it) and the object's
 //! pose, build the policy's observation with the model's own code ([`ModelIo`]), act, map the
-//! action to joint targets as in training, then interpolate to them over the step's servo
-//! periods, each set point through the [`SafetyFilter`]. Any fault — stale or failed state,
+//! action to joint targets as in training, then stream set points towards them over the step's
+//! servo periods, each from the [`SafetyFilter`] — the motion a model trained with
+//! `[control.servo]` learnt in simulation. The speed scale slows all of it in time: the policy
+//! steps at its control period over the scale, and the state it sees has its velocities
+//! multiplied back, so at any scale the policy meets the motion it was trained on. Any fault — stale or failed state,
 //! controller fault code, e-stop, safety stop, a failed call, a non-finite output, a workspace
 //! exit, Ctrl-C — stops the arm (StopMotion, ServoMoveEnd) at once and ends the run with that
 //! fault; nothing moves the arm afterwards ([`GuardedLink`]).
@@ -126,7 +129,8 @@ impl Deployment {
             fk,
         )?;
         let servo = options.safety.servo_period_ms / 1000.0;
-        let servo_ticks = ((io.control_period / servo).round() as u32).max(1);
+        let servo_ticks =
+            ((io.control_period / options.safety.speed_scale / servo).round() as u32).max(1);
         let watchdog = Watchdog::new(
             Duration::from_secs_f64(options.safety.state_deadline_ms / 1000.0),
             crate::fairino::error_codes::error_code_meaning,
@@ -144,7 +148,8 @@ impl Deployment {
         })
     }
 
-    /// Servo periods per control step (the control period over 8 ms, rounded).
+    /// Servo periods per control step (the control period over the speed scale, over 8 ms,
+    /// rounded).
     pub fn servo_ticks(&self) -> u32 {
         self.servo_ticks
     }
@@ -303,7 +308,7 @@ impl Deployment {
         self.filter.start(&start.state.joints_deg)?;
         self.link.send(&RobotCommand::ServoMoveStart)?;
 
-        let mut estimator = StateEstimator::new();
+        let mut estimator = StateEstimator::new(self.options.safety.speed_scale);
         let mut closing = false;
         let now = Instant::now();
         let state = estimator.estimate(
@@ -316,7 +321,6 @@ impl Deployment {
         );
         let mut command = self.io.hold(&state);
         let mut shown = vec![0.0; self.policy.act_dim()];
-        let mut from = start.state.joints_deg;
         let servo = Duration::from_secs_f64(self.options.safety.servo_period_ms / 1000.0);
         let cmd_t = self.options.safety.servo_period_ms / 1000.0;
         let steps = self.options.max_steps.unwrap_or(self.io.max_steps);
@@ -365,15 +369,10 @@ impl Deployment {
             }
             let target = self.calibration.to_robot(&command.arm_target);
             for k in 1..=self.servo_ticks {
-                let f = k as f64 / self.servo_ticks as f64;
-                let mut point = [0.0; 6];
-                for i in 0..6 {
-                    point[i] = from[i] + (target[i] - from[i]) * f;
-                }
                 if k > 1 {
                     self.checked_state()?;
                 }
-                let set_point = self.filter.next(&point)?;
+                let set_point = self.filter.next(&target)?;
                 self.link.send(&RobotCommand::ServoJ {
                     joints_deg: set_point,
                     cmd_t,
@@ -387,7 +386,6 @@ impl Deployment {
                     deadline = now;
                 }
             }
-            from = target;
         }
         self.link.send(&RobotCommand::ServoMoveEnd)?;
         self.gripper(true)?;

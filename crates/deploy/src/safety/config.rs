@@ -11,9 +11,12 @@ pub struct SafetyConfig {
     pub joint_margin_deg: f64,
     /// Joint speed cap at `speed_scale` 1 (deg/s); the FR5's joints reach 180 deg/s.
     pub max_joint_speed_deg_s: f64,
-    /// Joint acceleration cap (deg/s²), not scaled.
+    /// Joint acceleration cap at `speed_scale` 1 (deg/s²).
     pub max_joint_acc_deg_s2: f64,
-    /// Global speed scale in (0, 1]: starts low, raise it once the arm behaves.
+    /// Global speed scale in (0, 1]: starts low, raise it once the arm behaves. It slows the
+    /// policy's motion in time, as a teach pendant's speed slider does: the policy runs at its
+    /// control period over the scale, speeds are capped at scale × the cap and accelerations
+    /// at scale² × the cap, so the arm makes the trained motion, slower.
     pub speed_scale: f64,
     /// The TCP must stay in this box (robot base frame, mm).
     pub workspace_min_mm: [f64; 3],
@@ -100,5 +103,11 @@ impl SafetyConfig {
     /// The speed cap in force (deg/s).
     pub fn speed_cap(&self) -> f64 {
         self.max_joint_speed_deg_s * self.speed_scale
+    }
+
+    /// The acceleration cap in force (deg/s²): time slowed by the scale divides accelerations
+    /// by its square.
+    pub fn acc_cap(&self) -> f64 {
+        self.max_joint_acc_deg_s2 * self.speed_scale * self.speed_scale
     }
 }

@@ -1,24 +1,20 @@
 //! [`SafetyFilter`]: every servo set point passes through here.
 //!
-//! Each period the filter moves its last set point towards the requested target with a
-//! velocity chosen inside the intersection of four windows, per joint:
-//! - the speed cap `±v` (scaled by the global speed scale);
-//! - the acceleration cap: within `a·dt` of the last velocity;
-//! - the soft limits *with room to brake*: from the new position, braking at `a` must stop
-//!   before the limit (`p + v·dt + v²/2a ≤ upper`), so a limit is never crossed even when the
-//!   target jumps past it;
-//! - a profile that can stop at the target, so the arm does not overshoot it.
+//! The joint motion is the environment's [`JointRamp`] — the same code a policy trained with
+//! `[control.servo]` moved through in simulation: speed and acceleration caps per period, soft
+//! limits with room to brake, every joint in step along a straight joint-space line, stopping
+//! at the target. The caps and limits hold by construction (see [`JointRamp`]).
 //!
-//! The first three windows always intersect (braking at `a` from a feasible state stays
-//! feasible), so the caps and limits hold by construction. The TCP workspace box is checked on
-//! the result with forward kinematics, and so is the point where braking from it would stop
-//! (so braking starts before the wall: in the property test this cut the stops at the box from
-//! 154 to 0 per million outputs); if either leaves the box, the filter brakes every
-//! joint as hard as allowed instead, and if even that leaves the box it refuses with
-//! [`Fault::WorkspaceExit`] (the caller stops the arm) rather than send it.
+//! On top, the TCP workspace box is checked on each set point with forward kinematics, and so
+//! is the point where braking from it would stop (so braking starts before the wall: in the
+//! property test this cut the stops at the box from 154 to 0 per million outputs); if either
+//! leaves the box, the filter brakes every joint as hard as allowed instead, and if even that
+//! leaves the box it refuses with [`Fault::WorkspaceExit`] (the caller stops the arm) rather
+//! than send it.
 
 use super::{Fault, SafetyConfig};
 use crate::error::{DeployError, Result};
+use fairgrasp_env::arm::JointRamp;
 
 /// The TCP position (mm, robot base frame) for joint angles in degrees, or `None` when it
 /// cannot be computed (treated as outside the box).
@@ -29,25 +25,16 @@ const EPS: f64 = 1e-9;
 
 /// The safety layer's motion filter (see the [module](self) documentation).
 pub struct SafetyFilter {
+    ramp: JointRamp,
     lower: [f64; 6],
     upper: [f64; 6],
-    speed: f64,
-    acc: f64,
-    dt: f64,
     box_min: [f64; 3],
     box_max: [f64; 3],
     fk: ForwardKinematics,
-    last: Option<[f64; 6]>,
-    velocity: [f64; 6],
 }
 
-/// The largest speed from which braking at `acc` stops within `room` after one more period
-/// of `dt` at that speed: the positive root of `v·dt + v²/(2·acc) = room`.
-fn braking_speed(room: f64, acc: f64, dt: f64) -> f64 {
-    if room <= 0.0 {
-        return 0.0;
-    }
-    acc * (-dt + (dt * dt + 2.0 * room / acc).sqrt())
+fn six(v: &[f64]) -> [f64; 6] {
+    std::array::from_fn(|i| v[i])
 }
 
 impl SafetyFilter {
@@ -90,17 +77,19 @@ impl SafetyFilter {
                 ),
             ));
         }
+        let limits: Vec<(f64, f64)> = (0..6).map(|i| (lower[i], upper[i])).collect();
         Ok(Self {
+            ramp: JointRamp::new(
+                &limits,
+                config.speed_cap(),
+                config.acc_cap(),
+                config.servo_period_ms / 1000.0,
+            ),
             lower,
             upper,
-            speed: config.speed_cap(),
-            acc: config.max_joint_acc_deg_s2,
-            dt: config.servo_period_ms / 1000.0,
             box_min,
             box_max: config.workspace_max_mm,
             fk,
-            last: None,
-            velocity: [0.0; 6],
         })
     }
 
@@ -111,7 +100,7 @@ impl SafetyFilter {
 
     /// Speed cap (deg/s), acceleration cap (deg/s²) and period (s).
     pub fn caps(&self) -> (f64, f64, f64) {
-        (self.speed, self.acc, self.dt)
+        self.ramp.caps()
     }
 
     /// The TCP box enforced (mm), with the table's height folded into its floor.
@@ -121,7 +110,7 @@ impl SafetyFilter {
 
     /// The last set point sent (deg), and its velocity (deg/s).
     pub fn last(&self) -> Option<([f64; 6], [f64; 6])> {
-        self.last.map(|p| (p, self.velocity))
+        self.ramp.last().map(|(p, v)| (six(p), six(v)))
     }
 
     /// The TCP (mm) for joint angles (deg), when it lies inside the box.
@@ -154,109 +143,38 @@ impl SafetyFilter {
                 tcp[0], tcp[1], tcp[2], self.box_min, self.box_max
             )));
         }
-        self.last = Some(*measured);
-        self.velocity = [0.0; 6];
+        self.ramp.start(measured);
         Ok(())
     }
 
     /// The next set point towards `target` (deg), or the fault that stops the arm. After a
     /// fault the filter must be started again.
     pub fn next(&mut self, target: &[f64; 6]) -> std::result::Result<[f64; 6], Fault> {
-        let Some(last) = self.last else {
+        if self.ramp.last().is_none() {
             return Err(Fault::UnsafeStart(
                 "the safety filter was not started".into(),
             ));
-        };
+        }
         if let Some(index) = target.iter().position(|v| !v.is_finite()) {
-            self.last = None;
+            self.ramp.stop();
             return Err(Fault::NonFiniteOutput {
                 index,
                 value: target[index] as f32,
             });
         }
-        let (dt, acc) = (self.dt, self.acc);
-        let (mut low, mut high, mut error) = ([0.0; 6], [0.0; 6], [0.0; 6]);
-        // The common rate `k` that moves every joint along the straight joint-space line to the
-        // target (v = k · error), each joint slow enough to stop at its goal and under the speed
-        // cap. Per-joint limits alone would let short moves finish first and bend the TCP's path
-        // (on the twin at speed scale 0.25 it dipped 7 mm below the table margin).
-        let mut k = f64::INFINITY;
-        for i in 0..6 {
-            let (p, v) = (last[i], self.velocity[i]);
-            error[i] = target[i].clamp(self.lower[i], self.upper[i]) - p;
-            let e = error[i].abs();
-            if e > 1e-12 {
-                let allowed = (e / dt).min(braking_speed(e, acc, dt)).min(self.speed);
-                k = k.min(allowed / e);
-            }
-            low[i] =
-                (-self.speed)
-                    .max(v - acc * dt)
-                    .max(-braking_speed(p - self.lower[i], acc, dt));
-            high[i] = self
-                .speed
-                .min(v + acc * dt)
-                .min(braking_speed(self.upper[i] - p, acc, dt));
-            if low[i] > high[i] {
-                // The windows intersect by construction; guard rounding anyway.
-                let braked = v - v.signum() * (acc * dt).min(v.abs());
-                (low[i], high[i]) = (braked, braked);
-            }
-        }
-        if !k.is_finite() {
-            k = 0.0;
-        }
-        // The largest share s ≤ 1 of that motion every joint's window allows.
-        let (mut s_lo, mut s_hi) = (0.0f64, 1.0f64);
-        for i in 0..6 {
-            let w = k * error[i];
-            if w > 0.0 {
-                s_lo = s_lo.max(low[i] / w);
-                s_hi = s_hi.min(high[i] / w);
-            } else if w < 0.0 {
-                s_lo = s_lo.max(high[i] / w);
-                s_hi = s_hi.min(low[i] / w);
-            } else if low[i] > 0.0 || high[i] < 0.0 {
-                s_hi = -1.0;
-            }
-        }
-        let mut step = [0.0; 6];
-        let mut velocity = [0.0; 6];
-        for i in 0..6 {
-            let chosen = if s_lo <= s_hi {
-                s_hi * k * error[i]
-            } else {
-                // Out of step (a joint still braking from an earlier motion): each joint on
-                // its own, inside its window.
-                (k * error[i]).clamp(low[i], high[i])
-            };
-            velocity[i] = chosen.clamp(low[i], high[i]);
-            step[i] = (last[i] + velocity[i] * dt).clamp(self.lower[i], self.upper[i]);
-        }
+        let mut step = six(&self.ramp.propose(target).expect("started"));
         // Look ahead: where braking from the new set point would stop must be in the box too,
         // so braking starts before the wall instead of at it.
-        let stop_point: [f64; 6] = std::array::from_fn(|i| {
-            let v = velocity[i];
-            (step[i] + v * v.abs() / (2.0 * acc)).clamp(self.lower[i], self.upper[i])
-        });
+        let stop_point = six(&self.ramp.stopping_point(&step).expect("started"));
         if self.tcp_in_box(&step).is_none() || self.tcp_in_box(&stop_point).is_none() {
-            // Brake every joint as hard as allowed along its present motion.
-            for i in 0..6 {
-                let v = self.velocity[i];
-                velocity[i] = v - v.signum() * (acc * dt).min(v.abs());
-                step[i] = (last[i] + velocity[i] * dt).clamp(self.lower[i], self.upper[i]);
-            }
+            step = six(&self.ramp.propose_brake().expect("started"));
             if self.tcp_in_box(&step).is_none() {
                 let tcp_mm = (self.fk)(&step).unwrap_or([f64::NAN; 3]);
-                self.last = None;
+                self.ramp.stop();
                 return Err(Fault::WorkspaceExit { tcp_mm });
             }
         }
-        for i in 0..6 {
-            velocity[i] = (step[i] - last[i]) / dt;
-        }
-        self.last = Some(step);
-        self.velocity = velocity;
+        self.ramp.commit(step.to_vec());
         Ok(step)
     }
 }

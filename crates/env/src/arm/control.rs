@@ -6,6 +6,7 @@
 //! within a few steps of the measured joints (the lead cap) and the joint limits; Cartesian mode
 //! also keeps the commanded TCP inside a workspace box.
 
+use crate::arm::servo::ServoConfig;
 use crate::arm::state::ArmState;
 use crate::error::{EnvError, Result};
 use crate::spaces::BoxSpace;
@@ -42,6 +43,9 @@ pub struct ControlConfig {
     /// Cartesian mode: the commanded TCP stays in this box, arm base frame (m).
     pub workspace_min: [f32; 3],
     pub workspace_max: [f32; 3],
+    /// The deployment's motion model: joint targets reach the drives through speed- and
+    /// acceleration-capped set points every servo period ([`crate::arm::servo`]).
+    pub servo: ServoConfig,
 }
 
 impl Default for ControlConfig {
@@ -56,6 +60,7 @@ impl Default for ControlConfig {
             // table top (the base stands on it) to 45 cm.
             workspace_min: [0.15, -0.35, 0.015],
             workspace_max: [0.85, 0.35, 0.45],
+            servo: ServoConfig::default(),
         }
     }
 }
@@ -76,6 +81,17 @@ impl ControlConfig {
         positive("control.max_tcp_delta", self.max_tcp_delta, 0.1)?;
         positive("control.max_yaw_delta", self.max_yaw_delta, 0.5)?;
         positive("control.lead_steps", self.lead_steps, 20.0)?;
+        positive("control.servo.period_ms", self.servo.period_ms, 100.0)?;
+        positive(
+            "control.servo.max_joint_speed_deg_s",
+            self.servo.max_joint_speed_deg_s,
+            1000.0,
+        )?;
+        positive(
+            "control.servo.max_joint_acc_deg_s2",
+            self.servo.max_joint_acc_deg_s2,
+            1e6,
+        )?;
         for k in 0..3 {
             let (lo, hi) = (self.workspace_min[k], self.workspace_max[k]);
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {

@@ -5,12 +5,14 @@
 //!
 //! - [`state`]: [`ArmState`], the plain state observations are computed from;
 //! - [`control`]: [`ActionMapper`], action → joint targets;
+//! - [`servo`]: [`JointRamp`], joint targets → capped set points (the deployment's motion);
 //! - [`observation`]: [`ObsWriter`] and noise groups;
 //! - [`config`]: [`ArmEnvConfig`], the shared configuration sections.
 
 pub mod config;
 pub mod control;
 pub mod observation;
+pub mod servo;
 pub mod state;
 
 pub use config::{
@@ -19,6 +21,7 @@ pub use config::{
 };
 pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
 pub use observation::{NoiseGroup, ObsWriter};
+pub use servo::{JointRamp, ServoConfig};
 pub use state::{ArmState, ObjectReading};
 
 use crate::core::{Env, EpisodeEvent, Frame, Info, Metadata, NamedValues, RenderMode, Step};
@@ -100,6 +103,8 @@ struct Episode {
     /// The state as the controller reports it, when it differs from the true one.
     reported: Option<ArmState>,
     last_obs: Vec<f32>,
+    /// The servo set points (physical joints, rad), when `[control.servo]` is on.
+    ramp: Option<JointRamp>,
 }
 
 impl Episode {
@@ -132,6 +137,39 @@ pub struct ArmEnv<T: Task> {
     action_space: BoxSpace,
     noise_groups: Vec<(Range<usize>, NoiseGroup)>,
     episode: Option<Episode>,
+}
+
+/// Servo periods per control step: the control period over the servo period, rounded (the
+/// FAIRINO's 8 ms into 33.3 ms: 4).
+pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
+    ((control_period * 1000.0 / period_ms).round() as u32).max(1)
+}
+
+/// One control step through the servo ramp: a set point every servo period, each held by the
+/// drives for that period's share of the physics substeps.
+fn step_servoed(
+    scene: &mut Scene,
+    ramp: &mut JointRamp,
+    target: &[f32],
+) -> std::result::Result<(), SimError> {
+    let substeps = scene.config().physics.substeps;
+    let ticks = servo_ticks(scene.control_period(), ramp.caps().2 as f32 * 1000.0)
+        .min(substeps)
+        .max(1);
+    let target: Vec<f64> = target.iter().map(|&v| v as f64).collect();
+    let mut done = 0;
+    for k in 1..=ticks {
+        let set_point = ramp.next(&target).expect("the ramp starts at reset");
+        let q: Vec<f32> = set_point.iter().map(|&v| v as f32).collect();
+        scene.set_arm_targets(&q)?;
+        // Spread the substeps over the ticks (8 over 4: two each).
+        let until = substeps * k / ticks;
+        while done < until {
+            scene.step_physics()?;
+            done += 1;
+        }
+    }
+    scene.check_finite()
 }
 
 /// The controller's view of `state` under joint offsets `offset`: reported joints and the TCP
@@ -352,6 +390,27 @@ impl<T: Task> ArmEnv<T> {
         obs
     }
 
+    /// A servo ramp started at the arm's present targets, when `[control.servo]` is on.
+    fn servo_ramp(&self) -> Option<JointRamp> {
+        let servo = &self.config.control.servo;
+        if !servo.enabled {
+            return None;
+        }
+        let ticks = servo_ticks(self.scene.control_period(), servo.period_ms);
+        let limits: Vec<(f64, f64)> = (self.scene.arm_limits().iter())
+            .map(|&(lo, hi)| (lo as f64, hi as f64))
+            .collect();
+        let mut ramp = JointRamp::new(
+            &limits,
+            (servo.max_joint_speed_deg_s as f64).to_radians(),
+            (servo.max_joint_acc_deg_s2 as f64).to_radians(),
+            self.scene.control_period() as f64 / ticks as f64,
+        );
+        let start: Vec<f64> = self.scene.arm_targets().iter().map(|&v| v as f64).collect();
+        ramp.start(&start);
+        Some(ramp)
+    }
+
     fn no_op_action(&self) -> Vec<f32> {
         let mut a = vec![0.0; self.action_space.dim()];
         *a.last_mut().expect("action has a gripper entry") = 1.0;
@@ -452,6 +511,7 @@ impl<T: Task> Env for ArmEnv<T> {
         let previous_action = vec![0.0; self.action_space.dim()];
         let obs = self.observe(view, &previous_action);
         let no_op = self.no_op_action();
+        let ramp = self.servo_ramp();
         self.episode = Some(Episode {
             steps: 0,
             done: false,
@@ -461,6 +521,7 @@ impl<T: Task> Env for ArmEnv<T> {
             joint_offset,
             reported,
             last_obs: obs.clone(),
+            ramp,
         });
         Ok((
             obs,
@@ -496,18 +557,24 @@ impl<T: Task> Env for ArmEnv<T> {
         {
             events.push(EpisodeEvent::IkFailed);
         }
-        if episode.joint_offset.is_empty() {
-            self.scene.set_arm_targets(&episode.command.arm_target)?;
+        // The controller servoes the reported angles (q + e) to its targets.
+        let physical: Vec<f32> = if episode.joint_offset.is_empty() {
+            episode.command.arm_target.clone()
         } else {
-            // The controller servoes the reported angles (q + e) to its targets.
-            let physical: Vec<f32> = (episode.command.arm_target.iter())
+            (episode.command.arm_target.iter())
                 .zip(&episode.joint_offset)
                 .map(|(t, e)| t - e)
-                .collect();
-            self.scene.set_arm_targets(&physical)?;
-        }
+                .collect()
+        };
         self.scene.set_gripper_open(episode.command.gripper_open)?;
-        match self.scene.step_control() {
+        let stepped = match episode.ramp.as_mut() {
+            None => self
+                .scene
+                .set_arm_targets(&physical)
+                .and_then(|()| self.scene.step_control()),
+            Some(ramp) => step_servoed(&mut self.scene, ramp, &physical),
+        };
+        match stepped {
             Ok(()) => {}
             Err(SimError::NonFinite(_)) => return Ok(self.non_finite_step()),
             Err(e) => return Err(e.into()),
