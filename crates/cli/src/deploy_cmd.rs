@@ -178,6 +178,9 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         log,
         interrupt,
     )?;
+    if let Some(why) = deployment.motion_mismatch() {
+        eprintln!("warning: {why}");
+    }
     println!(
         "{} on {} ({}): {} episode(s), speed scale {}, log {}",
         if args.live { "LIVE" } else { "dry run" },

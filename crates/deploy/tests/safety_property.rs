@@ -66,6 +66,8 @@ fn a_million_random_outputs_never_leave_the_limits_caps_or_box() {
         let mut f = filter(&arm, &config);
         let (lower, upper) = f.joint_limits();
         let (speed, acc, dt) = f.caps();
+        // The scale only ever lowers the caps the checks below hold the set points to.
+        assert!(speed <= config.max_joint_speed_deg_s && acc <= config.max_joint_acc_deg_s2);
         let (box_min, box_max) = f.workspace();
         let mut start = arm.home_deg;
         for v in &mut start {

@@ -429,3 +429,35 @@ fn random_shapes_draw_boxes_and_cylinders_in_range_and_show_their_size() {
         "{boxes} boxes, {cylinders} cylinders"
     );
 }
+
+/// Largest change of any arm drive target over one control step of a full-scale action, and
+/// whether the scripted policy still grasps.
+fn servo_run(enabled: bool) -> (f32, bool) {
+    let mut env = env_with(|c| c.control.servo.enabled = enabled);
+    env.reset(Some(4)).unwrap();
+    let mut action = vec![1.0; env.action_space().dim()];
+    action[0] = -1.0;
+    let before = env.scene().arm_targets();
+    env.step(&action).unwrap();
+    let after = env.scene().arm_targets();
+    let jump = (before.iter().zip(&after))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    let (success, _, _) = scripted_episode(&mut env, 4);
+    (jump, success)
+}
+
+#[test]
+fn the_servo_model_caps_the_drive_targets_and_still_lets_the_arm_grasp() {
+    let (free, grasps_free) = servo_run(false);
+    let (servoed, grasps_servoed) = servo_run(true);
+    // From rest, four 8.3 ms periods at 720 deg/s² reach at most 720·(1+2+3+4)·dt² ≈ 0.5°.
+    let dt = 1.0 / 30.0 / 4.0;
+    let bound = (720.0f32 * 10.0 * dt * dt).to_radians() + 1e-6;
+    assert!(servoed <= bound, "{servoed} rad > {bound} rad");
+    assert!(
+        free > 5.0 * bound,
+        "without the model the target jumps: {free} rad"
+    );
+    assert!(grasps_free && grasps_servoed);
+}

@@ -154,6 +154,12 @@ impl Deployment {
         self.servo_ticks
     }
 
+    /// Why the arm will not move as the policy learnt, if it will not
+    /// ([`ModelIo::motion_mismatch`]).
+    pub fn motion_mismatch(&self) -> Option<String> {
+        self.io.motion_mismatch(&self.options.safety)
+    }
+
     /// The home pose in robot degrees.
     pub fn home_deg(&self) -> [f64; 6] {
         self.calibration.to_robot(&self.io.nominal.q)

@@ -3,6 +3,8 @@
 //! facts — the same code the policy was trained through.
 
 use crate::error::{DeployError, Result};
+use crate::safety::SafetyConfig;
+use fairgrasp_env::arm::ServoConfig;
 use fairgrasp_env::arm::{ActionMode, ArmState, Command};
 use fairgrasp_env::sim::kinematics::SerialChain;
 use fairgrasp_env::wrappers::RescaleAction;
@@ -79,6 +81,35 @@ impl ModelIo {
         })
     }
 
+    /// The motion model the policy was trained through (`[control.servo]`).
+    pub fn servo(&self) -> &ServoConfig {
+        &self.env.inner().mapper().config().servo
+    }
+
+    /// Why the arm's motion under `safety` is not the one the policy trained on, if it is not:
+    /// a model trained without `[control.servo]`, or with other caps.
+    pub fn motion_mismatch(&self, safety: &SafetyConfig) -> Option<String> {
+        let servo = self.servo();
+        if !servo.enabled {
+            return Some(
+                "this model was trained with targets reaching the drives at once, not through                  the deployment's set-point ramp; expect it to grasp less often than in                  simulation (train with configs/ppo_deploy.toml: docs/deployment.md)"
+                    .into(),
+            );
+        }
+        let trained = (
+            servo.max_joint_speed_deg_s as f64,
+            servo.max_joint_acc_deg_s2 as f64,
+        );
+        let here = (safety.max_joint_speed_deg_s, safety.max_joint_acc_deg_s2);
+        let differs = |a: f64, b: f64| (a - b).abs() > 1e-3 * a.abs().max(1.0);
+        (differs(trained.0, here.0) || differs(trained.1, here.1)).then(|| {
+            format!(
+                "the model trained with caps of {} deg/s and {} deg/s²; the safety settings                  allow {} deg/s and {} deg/s² at scale 1, so the arm will not move as it learnt",
+                trained.0, trained.1, here.0, here.1
+            )
+        })
+    }
+
     pub fn action_mode(&self) -> ActionMode {
         self.env.inner().mapper().config().action_mode
     }
@@ -111,5 +142,34 @@ impl ModelIo {
             .mapper()
             .apply(state, action, command)
             .is_none()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fairgrasp_env::GraspConfig;
+
+    #[test]
+    fn a_model_trained_without_the_servo_model_or_with_other_caps_is_flagged() {
+        let safety = SafetyConfig::default();
+        let plain = ModelIo::for_config(GraspConfig::default()).unwrap();
+        assert!(
+            plain
+                .motion_mismatch(&safety)
+                .unwrap()
+                .contains("ppo_deploy")
+        );
+        let mut config = GraspConfig::default();
+        config.control.servo.enabled = true;
+        let servoed = ModelIo::for_config(config).unwrap();
+        assert_eq!(servoed.motion_mismatch(&safety), None);
+        let gentler = SafetyConfig {
+            max_joint_acc_deg_s2: 300.0,
+            // The speed scale is not a mismatch: it slows the same motion in time.
+            speed_scale: 0.1,
+            ..SafetyConfig::default()
+        };
+        assert!(servoed.motion_mismatch(&gentler).unwrap().contains("300"));
     }
 }
