@@ -1,0 +1,86 @@
+//! A policy trained through the deployment's motion model (`configs/ppo_deploy.toml`) grasps on
+//! the digital twin — with reply latency, encoder noise and a speed scale below 1 — over the
+//! real protocol: the whole road from a trained model to a controller, judged by the twin.
+//!
+//! Its own test binary, so no other twin competes with this one for the CPU (the twin runs
+//! its physics in real time).
+
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
+use fairgrasp_deploy::pose_source::StreamedPose;
+use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
+use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::faults::FaultCommand;
+use fairgrasp_deploy::twin::{Twin, TwinConfig};
+use fairgrasp_rl::policies::Policy;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+/// `fairgrasp train --config configs/ppo_deploy.toml` (seed 42), its best model.
+fn model_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/deploy_ppo")
+}
+
+#[test]
+fn a_policy_trained_through_the_servo_model_grasps_on_the_twin() {
+    let faults = ["latency_ms=10", "joint_noise_deg=0.05"]
+        .iter()
+        .map(|f| FaultCommand::parse_assignment(f).unwrap())
+        .collect();
+    let twin = Twin::spawn(TwinConfig {
+        faults,
+        ..TwinConfig::ephemeral()
+    })
+    .unwrap();
+    let client = FairinoClient::connect(
+        "127.0.0.1",
+        &ClientConfig {
+            rpc_port: twin.rpc_addr().port(),
+            cnde_port: twin.cnde_addr().port(),
+            ..ClientConfig::default()
+        },
+    )
+    .unwrap();
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let calibration = Calibration::identity(&io.limits_rad);
+    let options = DeployOptions {
+        live: true,
+        episodes: 3,
+        safety: SafetyConfig {
+            speed_scale: 0.5,
+            ..SafetyConfig::default()
+        },
+        ..DeployOptions::default()
+    };
+    let mut deployment = Deployment::new(
+        Box::new(client),
+        policy,
+        calibration,
+        options,
+        JsonLog::create(None).unwrap(),
+        Arc::new(AtomicBool::new(false)),
+    )
+    .unwrap();
+    assert_eq!(deployment.motion_mismatch(), None);
+    assert_eq!(deployment.servo_ticks(), 8, "1/30 s ÷ 0.5 over 8 ms");
+    let mut host = TwinHost::detect(&twin.rpc_addr().to_string(), 2_000_000_000)
+        .unwrap()
+        .expect("the twin says it is one");
+    let mut pose = StreamedPose::tcp(
+        &twin.pose_addr().unwrap().to_string(),
+        Duration::from_secs(1),
+    )
+    .unwrap();
+    let report = deployment.run(&mut host, &mut pose).unwrap();
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    let grasped = report
+        .episodes
+        .iter()
+        .filter(|e| e.success == Some(true))
+        .count();
+    // 40 of 40 in the measured runs (docs/deployment.md); one miss is allowed for a loaded host.
+    assert!(grasped >= 2, "{grasped} of 3 grasps: {:?}", report.episodes);
+}
