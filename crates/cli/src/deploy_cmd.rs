@@ -66,7 +66,8 @@ pub struct DeployArgs {
     /// Control steps per episode (default: the model's episode length).
     #[arg(long)]
     pub steps: Option<u32>,
-    /// Global speed scale in (0, 1] (overrides the safety file's; 0.25 by default).
+    /// Global speed scale in (0, 1] (overrides the safety file's; 0.25 by default): the
+    /// policy's motion slowed in time, like a teach pendant's speed slider.
     #[arg(long)]
     pub speed_scale: Option<f64>,
     /// TOML file with a [safety] table (limits, caps, workspace box, deadline).

@@ -13,8 +13,9 @@ use fairgrasp_env::sim::rapier3d::na::{Isometry3, Vector3};
 use std::time::Instant;
 
 /// Gripper position (% open) below which a closed gripper that has stopped is taken to hold
-/// the object: fully closed (0 %) means it closed on nothing.
-const HOLDING_MIN_PERCENT: u8 = 2;
+/// nothing: fully closed reads 0–4 % on the twin (finger jitter), and the simulator's grasp
+/// rule asks for more than 5 mm of the 90 mm stroke.
+const HOLDING_MIN_PERCENT: u8 = 6;
 /// How far (% of the stroke) the fingers must have closed before a stop counts as a grasp, so
 /// the first reading after a close command (fingers not yet moving) is not one.
 const HOLDING_MIN_TRAVEL: u8 = 5;
@@ -98,11 +99,12 @@ impl StateEstimator {
         self.last_gripper = Some(position);
         // Travel is asked of "motion done" too: the first readings after a close command can
         // still carry the open move's "done".
-        // And one whose fingers are as close as the object is wide (its widest extent across
-        // the table, plus 3 mm) is touching it, as the simulator's pads report at contact.
+        // And one whose fingers are as far apart as the object is wide (between its narrowest
+        // and widest extent across the table, ±3 mm) is touching it, as the simulator's pads
+        // report at contact. Below that band the fingers passed it: nothing between them.
         let reading0 = &nominal.objects[0];
-        let widest = 2.0 * reading0.half_extents[0].max(reading0.half_extents[1]);
-        let at_width = opening <= widest + 0.003;
+        let (a, b) = (reading0.half_extents[0], reading0.half_extents[1]);
+        let at_width = (2.0 * a.min(b) - 0.003..=2.0 * a.max(b) + 0.003).contains(&opening);
         let holding = gripper_closing
             && travelled
             && position >= HOLDING_MIN_PERCENT
@@ -189,10 +191,18 @@ mod tests {
     fn a_stale_motion_done_or_a_fully_closed_gripper_is_not_a_grasp() {
         // The open move's "done" still showing right after the close command.
         assert_eq!(pads(&[(100, true), (100, true)]), [false, false]);
-        // Closed on nothing. (A reading taken as the fingers pass through the object's width
-        // would count: one control step of contact, where the simulator shows none.)
+        // Closed on nothing, or stopped well inside the object's width (on an edge, or on
+        // nothing at 10 %) while still moving. (A reading taken as the fingers pass through the
+        // object's width would count: one control step of contact, where the simulator shows
+        // none.)
         assert_eq!(
             pads(&[(100, true), (70, false), (0, true), (0, true)]),
+            [false; 4]
+        );
+        assert_eq!(pads(&[(100, true), (30, false), (11, false)]), [false; 3]);
+        // Fully closed reads a few percent (finger jitter): stopped there, nothing is held.
+        assert_eq!(
+            pads(&[(100, true), (40, false), (4, false), (4, true)]),
             [false; 4]
         );
     }
