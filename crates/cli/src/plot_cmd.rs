@@ -48,6 +48,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         runs: &runs,
         x: args.x,
         title: args.title.as_deref(),
+        smooth: args.smooth as usize,
     };
     let bytes = figure.render(format)?;
     fairgrasp_rl::save_util::write_atomic(&args.out, &bytes)
@@ -251,6 +252,7 @@ mod tests {
             "wall time (s)",
             "mean episode return",
             "PPO against SAC",
+            "Success rate (evaluation, mean of 3) against wall time",
         ] {
             assert!(svg.contains(text), "missing {text:?}");
         }

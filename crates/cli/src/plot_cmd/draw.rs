@@ -97,6 +97,8 @@ pub struct Figure<'a> {
     pub runs: &'a [RunCurves],
     pub x: XAxis,
     pub title: Option<&'a str>,
+    /// The moving-average window the curves were smoothed with (named in the captions).
+    pub smooth: usize,
 }
 
 impl Figure<'_> {
@@ -224,8 +226,12 @@ impl Figure<'_> {
                 (lo - pad..hi + pad, "mean episode return", 1.0)
             }
         };
+        let smoothed = match self.smooth {
+            0 | 1 => String::new(),
+            n => format!(", mean of {n}"),
+        };
         let caption = format!(
-            "{} ({}) against {}",
+            "{} ({}{smoothed}) against {}",
             match metric {
                 Metric::Success => "Success rate",
                 Metric::Return => "Return",
