@@ -7,6 +7,7 @@
 //! output file is rewritten, the rest of the file is kept.
 
 use anyhow::{Context, Result, bail};
+use fairgrasp_rl::logger::ProgressLog;
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary, evaluate};
 use std::fmt::Write as _;
@@ -139,26 +140,24 @@ fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
 
 /// The rows of progress.csv that hold an evaluation.
 fn eval_curve(path: &Path) -> Result<Vec<CurvePoint>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let column = |name: &str| header.iter().position(|c| *c == name);
-    let (Some(steps), Some(seconds), Some(success)) = (
-        column("time/total_timesteps"),
-        column("time/time_elapsed"),
-        column("eval/success_rate"),
-    ) else {
+    let log = ProgressLog::read(path)?;
+    let columns = [
+        "time/total_timesteps",
+        "time/time_elapsed",
+        "eval/success_rate",
+    ];
+    if columns.iter().any(|c| log.column(c).is_none()) {
         bail!("{}: no evaluation columns", path.display());
-    };
-    Ok(lines
-        .filter_map(|line| {
-            let cells: Vec<&str> = line.split(',').collect();
-            let get = |i: usize| cells.get(i)?.parse::<f64>().ok();
+    }
+    let [steps, seconds, success] = columns.map(|c| log.values(c));
+    Ok(steps
+        .zip(seconds)
+        .zip(success)
+        .filter_map(|((steps, seconds), success)| {
             Some(CurvePoint {
-                steps: get(steps)?,
-                seconds: get(seconds)?,
-                success: get(success)?,
+                steps: steps?,
+                seconds: seconds?,
+                success: success?,
             })
         })
         .collect())
@@ -278,6 +277,7 @@ fn write_section(path: &Path, section: &str) -> Result<()> {
 /// Success rate against steps (left) and wall time (right), one line per algorithm.
 fn draw_curves(results: &[RunResult], path: &Path) -> Result<()> {
     use plotters::prelude::*;
+    crate::plot_cmd::register_fonts();
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)?;
     }

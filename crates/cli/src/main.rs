@@ -10,6 +10,7 @@ mod env_cmd;
 mod eval_cmd;
 mod export_cmd;
 mod inspect;
+mod plot_cmd;
 mod robustness_cmd;
 mod train_cmd;
 mod twin_cmd;
@@ -41,6 +42,9 @@ enum Command {
     Train(train_cmd::TrainArgs),
     /// Evaluate a saved model on held-out episodes (success rate, mean return and length).
     Eval(eval_cmd::EvalArgs),
+    /// Plot runs' learning curves (success rate and return against env steps and wall time)
+    /// from their progress.csv into one PNG or SVG.
+    Plot(plot_cmd::PlotArgs),
     /// Export a saved model as ONNX (raw observation → action) or standalone safetensors.
     Export(export_cmd::ExportArgs),
     /// Evaluate a saved model over a grid of held-out conditions (mass, friction, latency,
@@ -149,6 +153,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(command) => demo::run(command),
         Command::Train(args) => train_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
+        Command::Plot(args) => plot_cmd::run(&args),
         Command::Export(args) => export_cmd::run(&args),
         Command::Robustness(args) => robustness_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),

@@ -376,3 +376,27 @@ fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_the
     assert!(!out.status.success());
     assert!(text(&out).1.contains("nothing-here"), "{}", text(&out).1);
 }
+
+#[test]
+fn plot_reports_a_bad_run_directory_or_format_and_fails() {
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("no_such_run");
+    let out = tmp.path().join("curves.png");
+    let result = fairgrasp(&[
+        "plot",
+        missing.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let (_, stderr) = text(&result);
+    assert!(!result.status.success());
+    assert!(
+        stderr.contains(&format!("{}: no such run directory", missing.display())),
+        "{stderr}"
+    );
+    let result = fairgrasp(&["plot", missing.to_str().unwrap(), "--out", "curves.pdf"]);
+    let (_, stderr) = text(&result);
+    assert!(!result.status.success());
+    assert!(stderr.contains("must end in .png or .svg"), "{stderr}");
+    assert!(!out.exists());
+}

@@ -1,5 +1,6 @@
 //! A CSV log of the same scalars TensorBoard gets (SB3's `progress.csv`): one row per dump,
 //! one column per tag; a tag first seen later rewrites the header (the file is small).
+//! [`ProgressLog`] reads such a file back, strictly (for plotting and benchmarks).
 
 use std::collections::BTreeMap;
 use std::io::{self, Write};
@@ -94,6 +95,120 @@ impl CsvLogger {
     }
 }
 
+/// A `progress.csv` read back: its columns and, per row, each column's value (`None` where the
+/// cell is empty, as it is for every tag not logged in that row).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProgressLog {
+    pub columns: Vec<String>,
+    pub rows: Vec<Vec<Option<f64>>>,
+}
+
+/// Why a `progress.csv` cannot be read; each names the file and, where it applies, the line.
+#[derive(Debug, thiserror::Error)]
+pub enum ProgressError {
+    #[error("cannot read {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error("{}: empty file (no header line)", path.display())]
+    Empty { path: PathBuf },
+    #[error("{}:{line}: {problem}", path.display())]
+    Garbled {
+        path: PathBuf,
+        line: usize,
+        problem: String,
+    },
+}
+
+impl ProgressLog {
+    /// Reads `path` (a run directory's `progress.csv`).
+    pub fn read(path: &Path) -> Result<Self, ProgressError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProgressError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses the text of a `progress.csv`; `path` only names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ProgressError> {
+        let garbled = |line: usize, problem: String| ProgressError::Garbled {
+            path: path.to_path_buf(),
+            line,
+            problem,
+        };
+        let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
+        let header = lines
+            .by_ref()
+            .find(|(_, l)| !l.trim().is_empty())
+            .ok_or_else(|| ProgressError::Empty {
+                path: path.to_path_buf(),
+            })?;
+        let columns: Vec<String> = header.1.split(',').map(|c| c.trim().to_string()).collect();
+        for (i, name) in columns.iter().enumerate() {
+            if name.is_empty() {
+                return Err(garbled(header.0, format!("column {} has no name", i + 1)));
+            }
+            if columns[..i].contains(name) {
+                return Err(garbled(header.0, format!("column `{name}` appears twice")));
+            }
+        }
+        // The logger appends while a run trains: a last line without its newline may be a row
+        // still being written, so it is dropped rather than reported.
+        let unfinished_tail = !text.ends_with('\n');
+        let last_line = text.lines().count();
+        let mut rows = Vec::new();
+        for (number, line) in lines {
+            if line.trim().is_empty() {
+                continue;
+            }
+            match Self::parse_row(line, &columns) {
+                Ok(row) => rows.push(row),
+                Err(_) if unfinished_tail && number == last_line => {}
+                Err(problem) => return Err(garbled(number, problem)),
+            }
+        }
+        Ok(Self { columns, rows })
+    }
+
+    fn parse_row(line: &str, columns: &[String]) -> Result<Vec<Option<f64>>, String> {
+        let cells: Vec<&str> = line.split(',').collect();
+        if cells.len() != columns.len() {
+            return Err(format!(
+                "{} cells, but the header has {} columns",
+                cells.len(),
+                columns.len()
+            ));
+        }
+        cells
+            .iter()
+            .zip(columns)
+            .map(|(cell, column)| {
+                let cell = cell.trim();
+                if cell.is_empty() {
+                    return Ok(None);
+                }
+                cell.parse::<f64>()
+                    .map(Some)
+                    .map_err(|_| format!("`{cell}` in column `{column}` is not a number"))
+            })
+            .collect()
+    }
+
+    /// The index of the column named `name`.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.columns.iter().position(|c| c == name)
+    }
+
+    /// The values of column `name`, one per row (all `None` if there is no such column).
+    pub fn values<'a>(&'a self, name: &str) -> impl Iterator<Item = Option<f64>> + use<'a> {
+        let index = self.column(name);
+        self.rows.iter().map(move |row| index.and_then(|i| row[i]))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -127,5 +242,61 @@ mod tests {
                 .unwrap()
                 .ends_with("300,2,\n400,,\n")
         );
+    }
+
+    #[test]
+    fn a_progress_log_reads_back_with_empty_cells_as_none() {
+        let text = "time/total_timesteps,rollout/ep_rew_mean,eval/success_rate\n\
+                    100,1.5,\n200,,0.5\n300,2,\n";
+        let log = ProgressLog::parse(text, Path::new("p.csv")).unwrap();
+        assert_eq!(log.rows.len(), 3);
+        assert_eq!(
+            log.values("eval/success_rate").collect::<Vec<_>>(),
+            [None, Some(0.5), None]
+        );
+        assert_eq!(
+            log.values("rollout/ep_rew_mean").collect::<Vec<_>>(),
+            [Some(1.5), None, Some(2.0)]
+        );
+        assert!(log.values("missing").all(|v| v.is_none()));
+    }
+
+    #[test]
+    fn garbled_progress_names_the_file_and_line() {
+        let path = Path::new("runs/x/progress.csv");
+        let err = ProgressLog::parse("a,b\n1,2\n3,oops\n", path).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "runs/x/progress.csv:3: `oops` in column `b` is not a number"
+        );
+        let err = ProgressLog::parse("a,b\n1,2,3\n4,5\n", path).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("runs/x/progress.csv:2: 3 cells"),
+            "{err}"
+        );
+        let err = ProgressLog::parse("a,a\n", path).unwrap_err();
+        assert!(
+            err.to_string().contains(":1: column `a` appears twice"),
+            "{err}"
+        );
+        let err = ProgressLog::parse("\n", path).unwrap_err();
+        assert!(matches!(err, ProgressError::Empty { .. }), "{err}");
+        let err = ProgressLog::read(Path::new("/nonexistent/progress.csv")).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("cannot read /nonexistent/progress.csv")
+        );
+    }
+
+    #[test]
+    fn a_row_still_being_written_is_dropped() {
+        let log = ProgressLog::parse("a,b\n1,2\n3,", Path::new("p.csv")).unwrap();
+        assert_eq!(
+            log.rows,
+            [vec![Some(1.0), Some(2.0)], vec![Some(3.0), None]]
+        );
+        let log = ProgressLog::parse("a,b\n1,2\n3", Path::new("p.csv")).unwrap();
+        assert_eq!(log.rows, [vec![Some(1.0), Some(2.0)]]);
     }
 }

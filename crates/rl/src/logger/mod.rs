@@ -3,5 +3,5 @@
 pub mod csv;
 pub mod tensorboard;
 
-pub use self::csv::CsvLogger;
+pub use self::csv::{CsvLogger, ProgressError, ProgressLog};
 pub use tensorboard::{ScalarEvent, TensorBoardWriter, read_scalars};
