@@ -223,7 +223,7 @@ impl Camera {
         let (u, v, _) = self.project(world)?;
         let inside =
             u >= 0.0 && v >= 0.0 && u < self.config.width as f32 && v < self.config.height as f32;
-        inside.then(|| (u as u32, v as u32))
+        inside.then_some((u as u32, v as u32))
     }
 }
 

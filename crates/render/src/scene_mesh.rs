@@ -128,7 +128,7 @@ impl SceneMeshes {
                 continue;
             };
             out.push(Placed {
-                mesh: &*part.mesh,
+                mesh: &part.mesh,
                 pose: *link * part.local,
                 colour: part.colour,
                 id: part.id,
@@ -144,7 +144,7 @@ impl SceneMeshes {
                 ShapeOwner::Bin(j) => (scene.bins()[j].color, Segment::Bin(j)),
             };
             out.push(Placed {
-                mesh: &**mesh,
+                mesh,
                 pose: placed.pose,
                 colour,
                 id: segment.id()?,
