@@ -15,6 +15,9 @@ const BANDS: u32 = 12;
 pub struct Mesh {
     pub vertices: Vec<Vector>,
     pub triangles: Vec<[u32; 3]>,
+    /// A closed surface wound counter-clockwise seen from outside: faces turned away from the
+    /// camera are hidden and can be skipped. Open or inconsistent meshes are drawn two-sided.
+    pub closed: bool,
 }
 
 impl Mesh {
@@ -22,7 +25,34 @@ impl Mesh {
         Self {
             vertices,
             triangles,
+            closed: false,
         }
+    }
+
+    /// Whether every edge is shared by exactly two triangles that run it in opposite
+    /// directions (a closed, consistently wound surface).
+    fn is_closed(&self) -> bool {
+        let mut edges = std::collections::HashMap::with_capacity(3 * self.triangles.len());
+        for t in &self.triangles {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *edges.entry((a, b)).or_insert(0u32) += 1;
+            }
+        }
+        !edges.is_empty()
+            && edges
+                .iter()
+                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+    }
+
+    /// Six times the enclosed volume, positive when the triangles wind outward.
+    fn signed_volume(&self) -> f32 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+                a.dot(b.cross(c))
+            })
+            .sum()
     }
 
     /// Appends `other` moved by `pose`.
@@ -35,10 +65,16 @@ impl Mesh {
     }
 
     /// Drops triangles that refer to missing vertices (user meshes), so drawing never indexes
-    /// out of bounds.
+    /// out of bounds; winds closed surfaces outward and marks them [`Self::closed`].
     fn checked(mut self) -> Self {
         let n = self.vertices.len() as u32;
         self.triangles.retain(|t| t.iter().all(|&i| i < n));
+        self.closed = self.is_closed();
+        if self.closed && self.signed_volume() < 0.0 {
+            for t in &mut self.triangles {
+                t.swap(1, 2);
+            }
+        }
         self
     }
 
@@ -64,6 +100,7 @@ pub fn tessellate_shape(shape: &dyn Shape) -> Option<Mesh> {
         Mesh {
             vertices: s.vertices().to_vec(),
             triangles: s.indices().to_vec(),
+            closed: false,
         }
     } else if let Some(s) = shape.as_compound() {
         let mut all = Mesh::default();
@@ -119,6 +156,7 @@ pub fn tessellate_geometry(geometry: &Geometry) -> Mesh {
                 })
                 .collect(),
             triangles: mesh.triangles.clone(),
+            closed: false,
         },
     };
     mesh.checked()
@@ -166,5 +204,26 @@ mod tests {
                 .iter()
                 .all(|v| (v.length() - 0.03).abs() < 1e-5)
         );
+    }
+
+    #[test]
+    fn closed_meshes_are_found_and_wound_outward() {
+        let cube = tessellate_shape(SharedShape::cuboid(0.1, 0.1, 0.1).as_ref()).unwrap();
+        assert!(cube.closed && cube.signed_volume() > 0.0);
+        // Turned inside out, it is wound back outward.
+        let inverted = Mesh {
+            triangles: cube.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect(),
+            ..cube.clone()
+        }
+        .checked();
+        assert!(inverted.closed);
+        assert!((inverted.signed_volume() - cube.signed_volume()).abs() < 1e-9);
+        // One face alone is open: drawn two-sided.
+        let face = Mesh {
+            triangles: cube.triangles[..2].to_vec(),
+            ..cube.clone()
+        }
+        .checked();
+        assert!(!face.closed);
     }
 }
