@@ -21,6 +21,21 @@ pub enum BenchCommand {
     /// The learning benchmark: train PPO and SAC with their defaults, evaluate on held-out
     /// episodes, write success against steps and wall time to docs/benchmarks.md.
     Learning(crate::bench_learning::LearningBenchArgs),
+    /// Frames per second of the CPU renderer (RGB, depth and segmentation together) at 84×84
+    /// and 640×480, one thread, the default camera on a reset scene.
+    Render(RenderBenchArgs),
+}
+
+#[derive(clap::Args)]
+pub struct RenderBenchArgs {
+    /// Seconds of wall time per measurement.
+    #[arg(long, default_value_t = 3.0)]
+    pub seconds: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub scene: SceneArgs,
 }
 
 #[derive(clap::Args)]
@@ -55,6 +70,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Physics(args) => physics(&args),
         BenchCommand::Env(args) => env(&args),
         BenchCommand::Learning(args) => crate::bench_learning::run(&args),
+        BenchCommand::Render(args) => render(&args),
     }
 }
 
@@ -194,6 +210,36 @@ fn env(args: &EnvBenchArgs) -> Result<()> {
             args.num_envs,
             vec2 / vec1
         );
+    }
+    Ok(())
+}
+
+fn render(args: &RenderBenchArgs) -> Result<()> {
+    use fairgrasp_render::{CameraConfig, Renderer};
+    anyhow::ensure!(args.seconds > 0.0, "--seconds must be positive");
+    let mut scene = Scene::new(args.scene.scene_config()?)?;
+    scene.reset(0)?;
+    let mut fps = Vec::new();
+    let mut triangles = 0;
+    for (w, h) in [(84, 84), (640, 480)] {
+        let mut renderer = Renderer::with_config(&scene, CameraConfig::front_three_quarter(w, h))?;
+        triangles = renderer.triangles(&scene)?;
+        fps.push(rate(args.seconds, || {
+            renderer.render(&scene).map_err(Into::into)
+        })?);
+    }
+    if args.json {
+        println!(
+            "{{\"fps_84x84\": {:.0}, \"fps_640x480\": {:.0}, \"triangles\": {triangles}}}",
+            fps[0], fps[1]
+        );
+    } else {
+        println!(
+            "CPU renderer, one thread, default camera, arm + gripper + table + cube ({triangles} triangles),"
+        );
+        println!("RGB + depth + segmentation per frame:");
+        println!("  84×84   : {:>8.0} frames/s", fps[0]);
+        println!("  640×480 : {:>8.0} frames/s", fps[1]);
     }
     Ok(())
 }

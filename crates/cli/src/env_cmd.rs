@@ -23,7 +23,7 @@ pub struct EnvArgs {
     #[arg(long = "env", default_value = fairgrasp_env::ENV_ID)]
     pub id: String,
     /// TOML file with the environment's settings (arm tasks: scene.*, control, task, reward,
-    /// randomization, shapes).
+    /// randomization, shapes, render).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Override a setting: `--set control.action_mode=cartesian --set randomization.enabled=true`.
@@ -77,6 +77,23 @@ pub enum EnvCommand {
     Scripted(ScriptedArgs),
     /// Print the effective configuration as TOML (the defaults, with --config/--set applied).
     Config(EnvArgs),
+    /// Reset an episode and write what the `[render]` camera sees as PNG images.
+    Render(RenderArgs),
+}
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// The RGB image (PNG).
+    #[arg(long, default_value = "scene.png")]
+    pub out: PathBuf,
+    /// Also write the depth image here (grey: near is light, far and background black).
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+    /// Episode seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub env: EnvArgs,
 }
 
 #[derive(clap::Args)]
@@ -125,6 +142,7 @@ pub fn run(command: EnvCommand) -> Result<()> {
         EnvCommand::Check(args) => check(&args),
         EnvCommand::Random(args) => random(&args),
         EnvCommand::Scripted(args) => scripted(&args),
+        EnvCommand::Render(args) => render(&args),
         EnvCommand::Config(args) => {
             let table = registry::effective_config(&args.id, &args.table()?)?;
             print!("{}", toml::to_string(&table)?);
@@ -465,6 +483,54 @@ fn scripted(args: &ScriptedArgs) -> Result<()> {
     );
     if !failed.is_empty() {
         println!("failed seeds: {failed:?}");
+    }
+    Ok(())
+}
+
+/// One frame of a fresh episode in `mode`, from an environment built with `env` and the mode set.
+fn render_frame(env: &EnvArgs, mode: &str, seed: u64) -> Result<fairgrasp_env::core::Frame> {
+    let mut args = env.clone();
+    args.overrides.push(format!("task.render_mode={mode}"));
+    let mut env = args.make()?;
+    env.reset(Some(seed))?;
+    env.render()?
+        .with_context(|| format!("{} has no {mode} render mode", args.id))
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    use fairgrasp_env::core::Frame;
+    use fairgrasp_env::render::image::{depth_to_rgb, write_png};
+    match render_frame(&args.env, "rgb_array", args.seed)? {
+        Frame::Rgb {
+            width,
+            height,
+            data,
+        } => {
+            write_png(&args.out, width, height, &data)?;
+            println!("wrote {} ({width}×{height})", args.out.display());
+        }
+        other => anyhow::bail!("expected an RGB frame, got {other:?}"),
+    }
+    if let Some(path) = &args.depth {
+        match render_frame(&args.env, "depth_array", args.seed)? {
+            Frame::Depth {
+                width,
+                height,
+                data,
+            } => {
+                let far = data.iter().copied().fold(0.0f32, f32::max);
+                let near = data.iter().copied().fold(far, f32::min);
+                // Stretch the range the scene occupies, not near..far of the camera.
+                let scene_far = data
+                    .iter()
+                    .copied()
+                    .filter(|&d| d < far)
+                    .fold(near, f32::max);
+                write_png(path, width, height, &depth_to_rgb(&data, near, scene_far))?;
+                println!("wrote {} ({width}×{height})", path.display());
+            }
+            other => anyhow::bail!("expected a depth frame, got {other:?}"),
+        }
     }
     Ok(())
 }

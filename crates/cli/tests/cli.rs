@@ -400,3 +400,45 @@ fn plot_reports_a_bad_run_directory_or_format_and_fails() {
     assert!(stderr.contains("must end in .png or .svg"), "{stderr}");
     assert!(!out.exists());
 }
+
+#[test]
+fn env_render_writes_png_images_and_bench_render_prints_frame_rates() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rgb, depth) = (dir.path().join("scene.png"), dir.path().join("depth.png"));
+    let out = fairgrasp(&[
+        "env",
+        "render",
+        "--env",
+        "FaArmSort-v0",
+        "--out",
+        rgb.to_str().unwrap(),
+        "--depth",
+        depth.to_str().unwrap(),
+        "--set",
+        "render.width=64",
+        "--set",
+        "render.height=48",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("64×48"), "{stdout}");
+    for path in [&rgb, &depth] {
+        let bytes = std::fs::read(path).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+        // IHDR: width and height, big-endian, after the signature and chunk header.
+        assert_eq!(&bytes[16..24], &[0, 0, 0, 64, 0, 0, 0, 48]);
+    }
+    let (_, stderr) = text(&fairgrasp(&[
+        "env",
+        "render",
+        "--set",
+        "render.fov_deg=200",
+    ]));
+    assert!(stderr.contains("render.fov_deg"), "{stderr}");
+
+    let out = fairgrasp(&["bench", "render", "--seconds", "0.05", "--json"]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert!(v["fps_84x84"].as_f64().unwrap() > v["fps_640x480"].as_f64().unwrap());
+}

@@ -12,12 +12,29 @@ use std::borrow::Cow;
 pub enum RenderMode {
     /// A text description of the current state, returned by [`Env::render`].
     Ansi,
+    /// An RGB image from the `[render]` camera ([`Frame::Rgb`]).
+    RgbArray,
+    /// A depth image from the `[render]` camera ([`Frame::Depth`]).
+    DepthArray,
 }
 
 /// What [`Env::render`] returns.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Frame {
     Text(String),
+    /// `height × width × 3` bytes of sRGB, rows top to bottom.
+    Rgb {
+        width: u32,
+        height: u32,
+        data: Vec<u8>,
+    },
+    /// `height × width` distances along the camera's optical axis (m); the camera's `far` where
+    /// nothing is in view.
+    Depth {
+        width: u32,
+        height: u32,
+        data: Vec<f32>,
+    },
 }
 
 /// Why an episode ended early, beside success and the time limit.

@@ -15,11 +15,25 @@ pub enum EnvError {
     Usage(String),
     #[error(transparent)]
     Sim(#[from] SimError),
+    #[error("rendering: {0}")]
+    Render(fairgrasp_render::RenderError),
     #[error("{path}: {problem}")]
     File { path: String, problem: String },
 }
 
 pub type Result<T, E = EnvError> = std::result::Result<T, E>;
+
+impl From<fairgrasp_render::RenderError> for EnvError {
+    /// Camera settings come from the `[render]` section: name the key.
+    fn from(e: fairgrasp_render::RenderError) -> Self {
+        match e {
+            fairgrasp_render::RenderError::Camera { field, problem } => {
+                EnvError::config(format!("render.{field}"), problem)
+            }
+            other => EnvError::Render(other),
+        }
+    }
+}
 
 impl EnvError {
     pub(crate) fn config(key: impl Into<String>, problem: impl Into<String>) -> Self {

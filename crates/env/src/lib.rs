@@ -32,6 +32,7 @@ pub mod wrappers;
 pub use crate::core::{Env, EpisodeEvent, Info, NamedValues, Step};
 pub use arm::{ActionMode, ArmEnv, ArmState, Task};
 pub use error::{EnvError, Result};
+pub use fairgrasp_render as render;
 pub use fairgrasp_sim as sim;
 pub use registry::{EnvSpec, make};
 pub use running_stats::RunningMeanStd;

@@ -2,8 +2,8 @@
 //! project ships, built from its id and a configuration table.
 //!
 //! A configuration is the env's own TOML table (for the arm tasks: `[scene]`, `[control]`,
-//! `[task]`, `[reward]`, `[randomization]`, `[shapes]`); keys it does not know are errors that
-//! name them. The training driver, evaluation, saved models and the Python module all go
+//! `[task]`, `[reward]`, `[randomization]`, `[shapes]`, `[render]`); keys it does not know are
+//! errors that name them. The training driver, evaluation, saved models and the Python module all go
 //! through [`make`], so a new task is usable everywhere once it is listed here.
 
 use crate::arm::{ArmEnv, ArmEnvConfig, Task};

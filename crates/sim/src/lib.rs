@@ -1,6 +1,6 @@
 //! fairgrasp-sim: a simulated FAIRINO arm with a parallel gripper, a table and objects.
 //!
-//! Layer 1 of fairgrasp (sim → env → rl → deploy). Built on rapier3d multibodies:
+//! Layer 1 of fairgrasp (sim → render → env → rl → deploy). Built on rapier3d multibodies:
 //! - [`model`]: URDF loading and validation (meshes, `package://` paths, clear errors);
 //! - [`robot`]: the model as a multibody with PD/torque control and state queries;
 //! - [`kinematics`]: forward and inverse kinematics of a chain;

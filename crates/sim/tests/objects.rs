@@ -750,3 +750,43 @@ fn objects_and_bins_read_from_toml() {
         assert!(err.contains(key), "{bad}: {err}");
     }
 }
+
+#[test]
+fn environment_shapes_list_the_table_placed_objects_and_bin_parts_where_they_are() {
+    use fairgrasp_sim::scene::ShapeOwner;
+    let mut scene = scene_with(
+        vec![
+            object("a", box_of([0.04, 0.04, 0.04])),
+            object("b", ObjectShape::Sphere { radius: 0.02 }),
+        ],
+        vec![BinConfig::default()],
+    );
+    scene.restore_home(&PhysicalParams::default(), &[]).unwrap();
+    let z = scene.table_top() as f64 + 0.02;
+    let pose = at(&scene, 0.5, -0.1, z);
+    scene.set_object_pose(1, &pose).unwrap();
+    let shapes = scene.environment_shapes();
+    let owners: Vec<ShapeOwner> = shapes.iter().map(|s| s.owner).collect();
+    // Object 0 is parked: left out. A bin is a floor and four walls.
+    assert_eq!(
+        owners,
+        [
+            ShapeOwner::Table,
+            ShapeOwner::Object(1),
+            ShapeOwner::Bin(0),
+            ShapeOwner::Bin(0),
+            ShapeOwner::Bin(0),
+            ShapeOwner::Bin(0),
+            ShapeOwner::Bin(0),
+        ]
+    );
+    // The teleported sphere is where it was put, before any step moved its collider.
+    let sphere = &shapes[1];
+    assert!(sphere.shape.as_ball().is_some());
+    let t = sphere.pose.translation;
+    assert!((t - to_pose(&pose).translation).length() < 1e-5, "{t}");
+    // The table's top face is at the table height.
+    let table = &shapes[0];
+    let aabb = table.shape.compute_aabb(&table.pose);
+    assert!((aabb.maxs.z - scene.table_top()).abs() < 1e-5);
+}

@@ -5,6 +5,7 @@ use crate::arm::control::ControlConfig;
 use crate::config::{check_non_negative, check_range};
 use crate::core::RenderMode;
 use crate::error::{EnvError, Result};
+use fairgrasp_render::{Camera, CameraConfig};
 use fairgrasp_sim::scene::SceneConfig;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -276,6 +277,8 @@ pub struct ArmEnvConfig<T, R> {
     pub reward: R,
     pub randomization: RandomizationConfig,
     pub shapes: ShapesConfig,
+    /// The camera of the `rgb_array` and `depth_array` render modes (unused otherwise).
+    pub render: CameraConfig,
 }
 
 impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
@@ -291,7 +294,9 @@ impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
         self.task.validate()?;
         self.reward.validate()?;
         self.randomization.validate()?;
-        self.shapes.validate()
+        self.shapes.validate()?;
+        Camera::new(self.render.clone())?;
+        Ok(())
     }
 
     /// Parses TOML text, applies `overrides` (`dotted.key=value`), then validates.

@@ -27,6 +27,7 @@ pub use state::{ArmState, ObjectReading};
 use crate::core::{Env, EpisodeEvent, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::{EnvError, Result};
 use crate::spaces::BoxSpace;
+use fairgrasp_render::Renderer;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::scene::{PhysicalParams, Scene, SceneConfig};
@@ -137,6 +138,8 @@ pub struct ArmEnv<T: Task> {
     action_space: BoxSpace,
     noise_groups: Vec<(Range<usize>, NoiseGroup)>,
     episode: Option<Episode>,
+    /// Built at the first image render, so that environments that never render pay nothing.
+    renderer: Option<Renderer>,
 }
 
 /// Servo periods per control step: the control period over the servo period, rounded (the
@@ -238,6 +241,7 @@ impl<T: Task> ArmEnv<T> {
             scene,
             config,
             episode: None,
+            renderer: None,
         })
     }
 
@@ -253,6 +257,12 @@ impl<T: Task> ArmEnv<T> {
 
     pub fn task(&self) -> &T {
         &self.task
+    }
+
+    /// The renderer behind the image render modes, once [`Env::render`] has built it (for
+    /// segmentation images and other cameras).
+    pub fn renderer(&self) -> Option<&Renderer> {
+        self.renderer.as_ref()
     }
 
     /// The action mapping (the same component the deployment loop uses).
@@ -474,7 +484,11 @@ impl<T: Task> Env for ArmEnv<T> {
     fn metadata(&self) -> Metadata {
         Metadata {
             id: T::ID,
-            render_modes: vec![RenderMode::Ansi],
+            render_modes: vec![
+                RenderMode::Ansi,
+                RenderMode::RgbArray,
+                RenderMode::DepthArray,
+            ],
             render_fps: 1.0 / self.scene.control_period(),
         }
     }
@@ -620,11 +634,31 @@ impl<T: Task> Env for ArmEnv<T> {
     }
 
     fn render(&mut self) -> Result<Option<Frame>> {
-        Ok(self
-            .config
-            .task
-            .render_mode()
-            .map(|RenderMode::Ansi| Frame::Text(self.render_text())))
+        let Some(mode) = self.config.task.render_mode() else {
+            return Ok(None);
+        };
+        if mode == RenderMode::Ansi {
+            return Ok(Some(Frame::Text(self.render_text())));
+        }
+        if self.renderer.is_none() {
+            let renderer = Renderer::with_config(&self.scene, self.config.render.clone())?;
+            self.renderer = Some(renderer);
+        }
+        let renderer = self.renderer.as_mut().expect("built above");
+        renderer.render(&self.scene)?;
+        let (width, height) = (renderer.width(), renderer.height());
+        Ok(Some(match mode {
+            RenderMode::DepthArray => Frame::Depth {
+                width,
+                height,
+                data: renderer.depth().to_vec(),
+            },
+            _ => Frame::Rgb {
+                width,
+                height,
+                data: renderer.rgb().to_vec(),
+            },
+        }))
     }
 
     fn close(&mut self) {

@@ -30,6 +30,7 @@ use crate::model::{Origin, RobotModel};
 use crate::robot::{PdGains, Robot, RobotBuildOptions, groups};
 use crate::{assets, model::LoadOptions};
 use objects::{MeshCache, ObjectHandles};
+pub use objects::{PlacedShape, ShapeOwner};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::na::{Isometry3, Translation3, UnitQuaternion, Vector3};

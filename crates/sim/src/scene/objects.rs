@@ -37,6 +37,23 @@ pub(super) struct ObjectGeometry {
 /// Convex hulls of mesh objects, by file and scale bits: per-episode shape changes reuse them.
 pub(super) type MeshCache = HashMap<(PathBuf, u32), ObjectGeometry>;
 
+/// What a shape of [`Scene::environment_shapes`] belongs to; indices as in `config.objects`
+/// and `config.bins`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ShapeOwner {
+    Table,
+    Object(usize),
+    Bin(usize),
+}
+
+/// A collider shape at its world pose.
+#[derive(Clone)]
+pub struct PlacedShape {
+    pub owner: ShapeOwner,
+    pub shape: SharedShape,
+    pub pose: Pose,
+}
+
 /// The handles of one object in the world.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct ObjectHandles {
@@ -473,6 +490,33 @@ impl Scene {
         }
         let body = self.robot.link_body(name)?;
         Some(self.world.bodies[body].colliders().to_vec())
+    }
+
+    // ── Shapes for renderers ───────────────────────────────────────────────
+
+    /// The table, every placed object (parked ones are left out) and every bin part as collider
+    /// shapes with their world poses: what a renderer draws besides the robot (whose links it
+    /// takes from the robot description's visuals and [`Self::link_pose`]). Poses come from the
+    /// bodies, so they are right just after a teleport too.
+    pub fn environment_shapes(&self) -> Vec<PlacedShape> {
+        let mut out = Vec::with_capacity(1 + self.objects.len() + 5 * self.bin_bodies.len());
+        let placed = |owner: ShapeOwner, c: ColliderHandle| PlacedShape {
+            owner,
+            shape: self.world.colliders[c].shared_shape().clone(),
+            pose: collider_pose(&self.world, c),
+        };
+        out.push(placed(ShapeOwner::Table, self.table_collider));
+        for (i, handles) in self.objects.iter().enumerate() {
+            if !self.object_parked(i) {
+                out.push(placed(ShapeOwner::Object(i), handles.collider));
+            }
+        }
+        for (j, &body) in self.bin_bodies.iter().enumerate() {
+            for &c in self.world.bodies[body].colliders() {
+                out.push(placed(ShapeOwner::Bin(j), c));
+            }
+        }
+        out
     }
 
     // ── Bins ───────────────────────────────────────────────────────────────

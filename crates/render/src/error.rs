@@ -1,0 +1,30 @@
+//! Errors of the renderer.
+
+use std::path::PathBuf;
+
+/// What can go wrong when setting up a camera, rendering or writing an image.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// A camera setting is out of range; `field` names it (`fov_deg`, `width`, …).
+    #[error("camera {field}: {problem}")]
+    Camera {
+        field: &'static str,
+        problem: String,
+    },
+    /// The scene has more parts than the segmentation ids have room for.
+    #[error("segmentation: {0}")]
+    Segmentation(String),
+    #[error("cannot write {path}: {problem}")]
+    Write { path: PathBuf, problem: String },
+}
+
+impl RenderError {
+    pub(crate) fn camera(field: &'static str, problem: impl Into<String>) -> Self {
+        Self::Camera {
+            field,
+            problem: problem.into(),
+        }
+    }
+}
+
+pub type Result<T, E = RenderError> = std::result::Result<T, E>;
