@@ -109,3 +109,43 @@ fn render_settings_parse_and_bad_cameras_name_the_key() {
         }
     }
 }
+
+#[test]
+fn the_sorting_task_shows_its_bins_and_objects() {
+    use fairgrasp_env::tasks::sort::{SortConfig, SortEnv};
+    let mut config = SortConfig::default();
+    config.task.render_mode = Some(RenderMode::RgbArray);
+    config.render.width = 160;
+    config.render.height = 120;
+    let mut env = SortEnv::new(config).unwrap();
+    env.reset(Some(2)).unwrap();
+    env.render().unwrap();
+    let r = env.renderer().unwrap();
+    let ids = r.segmentation();
+    let scene = env.scene();
+    for j in 0..scene.bins().len() {
+        let id = Segment::Bin(j).id().unwrap();
+        assert!(ids.contains(&id), "bin {j} not in view");
+        assert_eq!(
+            fairgrasp_env::render::segment_name(scene, id),
+            scene.bins()[j].name
+        );
+    }
+    let placed = (0..scene.num_objects())
+        .filter(|&i| !scene.object_parked(i))
+        .collect::<Vec<_>>();
+    assert!(placed.len() >= 2);
+    for i in placed {
+        assert!(
+            ids.contains(&Segment::Object(i).id().unwrap()),
+            "object {i}"
+        );
+    }
+    // Parked objects are not drawn.
+    for i in (0..scene.num_objects()).filter(|&i| scene.object_parked(i)) {
+        assert!(
+            !ids.contains(&Segment::Object(i).id().unwrap()),
+            "parked {i}"
+        );
+    }
+}

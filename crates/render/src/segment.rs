@@ -9,7 +9,8 @@
 //! | 64 + l        | robot link `l` (index in the robot model's links: arm   |
 //! |               | and gripper, e.g. `left_finger`)                        |
 //!
-//! Links merged into their parent's body (`tool0`, `tcp`) have no visual and never appear.
+//! Links without a shape (`tool0`, `tcp`) never appear. With the bundled FR5 and gripper:
+//! 64–70 `base_link`…`wrist3_link`, 72 `gripper_base`, 73/74 the left/right finger.
 //! [`crate::Renderer::segment_name`] names an id.
 
 use crate::error::{RenderError, Result};

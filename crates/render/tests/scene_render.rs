@@ -174,3 +174,23 @@ fn a_camera_change_resizes_and_shape_changes_reuse_the_cache() {
     // From the top, the cube is in view.
     assert!(r.segmentation().contains(&cube_id()));
 }
+
+#[test]
+fn the_documented_ids_hold_for_the_bundled_robot() {
+    let scene = Scene::new(SceneConfig::default()).unwrap();
+    for (id, name) in [
+        (0, "background"),
+        (1, "table"),
+        (32, "cube"),
+        (33, "unknown:33"),
+        (64, "link:base_link"),
+        (70, "link:wrist3_link"),
+        (71, "link:tool0"),
+        (72, "link:gripper_base"),
+        (73, "link:left_finger"),
+        (74, "link:right_finger"),
+        (75, "link:tcp"),
+    ] {
+        assert_eq!(segment_name(&scene, id), name, "id {id}");
+    }
+}
