@@ -11,6 +11,7 @@ mod eval_cmd;
 mod export_cmd;
 mod inspect;
 mod plot_cmd;
+mod record_cmd;
 mod robustness_cmd;
 mod train_cmd;
 mod twin_cmd;
@@ -45,6 +46,9 @@ enum Command {
     /// Plot runs' learning curves (success rate and return against env steps and wall time)
     /// from their progress.csv into one PNG or SVG.
     Plot(plot_cmd::PlotArgs),
+    /// Record episodes of a saved model (or random actions) as an animated GIF, with an
+    /// overlay of the step, return and success.
+    Record(record_cmd::RecordArgs),
     /// Export a saved model as ONNX (raw observation → action) or standalone safetensors.
     Export(export_cmd::ExportArgs),
     /// Evaluate a saved model over a grid of held-out conditions (mass, friction, latency,
@@ -154,6 +158,7 @@ fn main() -> std::process::ExitCode {
         Command::Train(args) => train_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Plot(args) => plot_cmd::run(&args),
+        Command::Record(args) => record_cmd::run(&args),
         Command::Export(args) => export_cmd::run(&args),
         Command::Robustness(args) => robustness_cmd::run(&args),
         Command::Env(command) => env_cmd::run(command),

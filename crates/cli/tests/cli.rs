@@ -442,3 +442,87 @@ fn env_render_writes_png_images_and_bench_render_prints_frame_rates() {
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     assert!(v["fps_84x84"].as_f64().unwrap() > v["fps_640x480"].as_f64().unwrap());
 }
+
+/// The frames of a GIF as RGBA, with its size.
+fn gif_frames(path: &std::path::Path) -> (u16, u16, Vec<Vec<u8>>) {
+    let mut options = gif::DecodeOptions::new();
+    options.set_color_output(gif::ColorOutput::RGBA);
+    let mut decoder = options
+        .read_info(std::fs::File::open(path).unwrap())
+        .unwrap();
+    let (w, h) = (decoder.width(), decoder.height());
+    let mut frames = Vec::new();
+    while let Some(frame) = decoder.read_next_frame().unwrap() {
+        assert_eq!((frame.width, frame.height), (w, h), "full frames only");
+        frames.push(frame.buffer.to_vec());
+    }
+    (w, h, frames)
+}
+
+/// Pixels of the success caption's green in the top-left corner.
+fn green_caption_pixels(rgba: &[u8], w: usize) -> usize {
+    (0..60)
+        .flat_map(|y| (0..w / 2).map(move |x| (y * w + x) * 4))
+        .filter(|&i| {
+            let (r, g, b) = (rgba[i] as i32, rgba[i + 1] as i32, rgba[i + 2] as i32);
+            g > r + 25 && g > b + 25
+        })
+        .count()
+}
+
+#[test]
+fn record_writes_a_gif_of_a_policy_s_episodes_with_the_outcome_shown() {
+    let dir = tempfile::tempdir().unwrap();
+    // Random actions, a 5-step episode: a frame before each step, then the final state held
+    // for 15 frames.
+    let random = dir.path().join("random.gif");
+    let out = fairgrasp(&[
+        "record",
+        "--episodes",
+        "1",
+        "--out",
+        random.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--set",
+        "task.max_episode_steps=5",
+    ]);
+    assert!(out.status.success(), "{}", text(&out).1);
+    let (w, h, frames) = gif_frames(&random);
+    assert_eq!((w, h), (64, 48));
+    assert_eq!(frames.len(), 5 + 15);
+    assert_ne!(frames[0], frames[5], "the arm moved");
+
+    // The servo-trained grasp policy of the deployment tests: it lifts the cube, and the
+    // last frames say so in green; the first does not.
+    let model =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/tests/data/deploy_ppo");
+    let trained = dir.path().join("trained.gif");
+    let out = fairgrasp(&[
+        "record",
+        "--model",
+        model.to_str().unwrap(),
+        "--episodes",
+        "1",
+        "--out",
+        trained.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("1 successful"), "{stdout}");
+    let (w, _, frames) = gif_frames(&trained);
+    let last = frames.last().unwrap();
+    assert!(green_caption_pixels(last, w as usize) > 20);
+    assert_eq!(green_caption_pixels(&frames[0], w as usize), 0);
+
+    for (name, expect) in [
+        ("x.mp4", "MP4 needs an external encoder"),
+        ("x.avi", "must end in .gif"),
+    ] {
+        let out = fairgrasp(&["record", "--out", dir.path().join(name).to_str().unwrap()]);
+        assert!(!out.status.success());
+        assert!(text(&out).1.contains(expect), "{}", text(&out).1);
+    }
+}
