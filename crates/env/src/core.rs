@@ -16,6 +16,8 @@ pub enum RenderMode {
     RgbArray,
     /// A depth image from the `[render]` camera ([`Frame::Depth`]).
     DepthArray,
+    /// A segmentation image from the `[render]` camera ([`Frame::Segmentation`]).
+    SegmentationArray,
 }
 
 /// What [`Env::render`] returns.
@@ -34,6 +36,13 @@ pub enum Frame {
         width: u32,
         height: u32,
         data: Vec<f32>,
+    },
+    /// `height × width` ids of what each pixel shows: 0 background, 1 table, 2 + j bin j,
+    /// 32 + i object i, 64 + l robot link l (docs/rendering.md).
+    Segmentation {
+        width: u32,
+        height: u32,
+        data: Vec<u16>,
     },
 }
 

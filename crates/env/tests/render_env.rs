@@ -149,3 +149,31 @@ fn the_sorting_task_shows_its_bins_and_objects() {
         );
     }
 }
+
+#[test]
+fn segmentation_array_labels_the_table_the_cube_and_the_arm_and_agrees_with_rgb() {
+    let mut env = env_with(Some(RenderMode::SegmentationArray), 96, 72);
+    assert!(
+        env.metadata()
+            .render_modes
+            .contains(&RenderMode::SegmentationArray)
+    );
+    env.reset(Some(3)).unwrap();
+    let Some(Frame::Segmentation {
+        width,
+        height,
+        data,
+    }) = env.render().unwrap()
+    else {
+        panic!("expected a segmentation frame");
+    };
+    assert_eq!((width, height, data.len()), (96, 72, 96 * 72));
+    // Background, table, the cube (object 0) and some arm link are all in view.
+    for id in [0u16, 1, 32] {
+        assert!(data.contains(&id), "id {id} missing");
+    }
+    assert!(data.iter().any(|&id| id >= 64), "no robot link");
+    // The same camera as rgb_array: the renderer's own segmentation of that frame.
+    let renderer = env.renderer().expect("built by render()");
+    assert_eq!(renderer.segmentation(), data.as_slice());
+}

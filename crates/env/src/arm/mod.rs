@@ -488,6 +488,7 @@ impl<T: Task> Env for ArmEnv<T> {
                 RenderMode::Ansi,
                 RenderMode::RgbArray,
                 RenderMode::DepthArray,
+                RenderMode::SegmentationArray,
             ],
             render_fps: 1.0 / self.scene.control_period(),
         }
@@ -652,6 +653,11 @@ impl<T: Task> Env for ArmEnv<T> {
                 width,
                 height,
                 data: renderer.depth().to_vec(),
+            },
+            RenderMode::SegmentationArray => Frame::Segmentation {
+                width,
+                height,
+                data: renderer.segmentation().to_vec(),
             },
             _ => Frame::Rgb {
                 width,
