@@ -142,39 +142,6 @@ pub struct ArmEnv<T: Task> {
     renderer: Option<Renderer>,
 }
 
-/// Servo periods per control step: the control period over the servo period, rounded (the
-/// FAIRINO's 8 ms into 33.3 ms: 4).
-pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
-    ((control_period * 1000.0 / period_ms).round() as u32).max(1)
-}
-
-/// One control step through the servo ramp: a set point every servo period, each held by the
-/// drives for that period's share of the physics substeps.
-fn step_servoed(
-    scene: &mut Scene,
-    ramp: &mut JointRamp,
-    target: &[f32],
-) -> std::result::Result<(), SimError> {
-    let substeps = scene.config().physics.substeps;
-    let ticks = servo_ticks(scene.control_period(), ramp.caps().2 as f32 * 1000.0)
-        .min(substeps)
-        .max(1);
-    let target: Vec<f64> = target.iter().map(|&v| v as f64).collect();
-    let mut done = 0;
-    for k in 1..=ticks {
-        let set_point = ramp.next(&target).expect("the ramp starts at reset");
-        let q: Vec<f32> = set_point.iter().map(|&v| v as f32).collect();
-        scene.set_arm_targets(&q)?;
-        // Spread the substeps over the ticks (8 over 4: two each).
-        let until = substeps * k / ticks;
-        while done < until {
-            scene.step_physics()?;
-            done += 1;
-        }
-    }
-    scene.check_finite()
-}
-
 /// The controller's view of `state` under joint offsets `offset`: reported joints and the TCP
 /// pose the kinematic model gives for them. `None` when there are no offsets.
 fn reported(mapper: &ActionMapper, state: &ArmState, offset: &[f32]) -> Option<ArmState> {
@@ -400,27 +367,6 @@ impl<T: Task> ArmEnv<T> {
         obs
     }
 
-    /// A servo ramp started at the arm's present targets, when `[control.servo]` is on.
-    fn servo_ramp(&self) -> Option<JointRamp> {
-        let servo = &self.config.control.servo;
-        if !servo.enabled {
-            return None;
-        }
-        let ticks = servo_ticks(self.scene.control_period(), servo.period_ms);
-        let limits: Vec<(f64, f64)> = (self.scene.arm_limits().iter())
-            .map(|&(lo, hi)| (lo as f64, hi as f64))
-            .collect();
-        let mut ramp = JointRamp::new(
-            &limits,
-            (servo.max_joint_speed_deg_s as f64).to_radians(),
-            (servo.max_joint_acc_deg_s2 as f64).to_radians(),
-            self.scene.control_period() as f64 / ticks as f64,
-        );
-        let start: Vec<f64> = self.scene.arm_targets().iter().map(|&v| v as f64).collect();
-        ramp.start(&start);
-        Some(ramp)
-    }
-
     fn no_op_action(&self) -> Vec<f32> {
         let mut a = vec![0.0; self.action_space.dim()];
         *a.last_mut().expect("action has a gripper entry") = 1.0;
@@ -526,7 +472,7 @@ impl<T: Task> Env for ArmEnv<T> {
         let previous_action = vec![0.0; self.action_space.dim()];
         let obs = self.observe(view, &previous_action);
         let no_op = self.no_op_action();
-        let ramp = self.servo_ramp();
+        let ramp = self.config.control.servo.ramp(&self.scene);
         self.episode = Some(Episode {
             steps: 0,
             done: false,
@@ -587,7 +533,7 @@ impl<T: Task> Env for ArmEnv<T> {
                 .scene
                 .set_arm_targets(&physical)
                 .and_then(|()| self.scene.step_control()),
-            Some(ramp) => step_servoed(&mut self.scene, ramp, &physical),
+            Some(ramp) => servo::step_servoed(&mut self.scene, ramp, &physical),
         };
         match stepped {
             Ok(()) => {}

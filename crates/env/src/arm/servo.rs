@@ -18,6 +18,8 @@
 //! finish first and bend the TCP's path (on the twin at speed scale 0.25 it dipped 7 mm below
 //! the table margin). Units are the caller's (degrees or radians, per second).
 
+use fairgrasp_sim::SimError;
+use fairgrasp_sim::scene::Scene;
 use serde::{Deserialize, Serialize};
 
 /// Floating-point slack in the limit checks.
@@ -48,6 +50,62 @@ impl Default for ServoConfig {
             max_joint_acc_deg_s2: 720.0,
         }
     }
+}
+
+impl ServoConfig {
+    /// A ramp for `scene`'s arm started at its present targets, when enabled: a set point every
+    /// servo period of the control step, the caps in radians.
+    pub fn ramp(&self, scene: &Scene) -> Option<JointRamp> {
+        if !self.enabled {
+            return None;
+        }
+        let ticks = servo_ticks(scene.control_period(), self.period_ms);
+        let limits: Vec<(f64, f64)> = (scene.arm_limits().iter())
+            .map(|&(lo, hi)| (lo as f64, hi as f64))
+            .collect();
+        let mut ramp = JointRamp::new(
+            &limits,
+            (self.max_joint_speed_deg_s as f64).to_radians(),
+            (self.max_joint_acc_deg_s2 as f64).to_radians(),
+            scene.control_period() as f64 / ticks as f64,
+        );
+        let start: Vec<f64> = scene.arm_targets().iter().map(|&v| v as f64).collect();
+        ramp.start(&start);
+        Some(ramp)
+    }
+}
+
+/// Servo periods per control step: the control period over the servo period, rounded (the
+/// FAIRINO's 8 ms into 33.3 ms: 4).
+pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
+    ((control_period * 1000.0 / period_ms).round() as u32).max(1)
+}
+
+/// One control step through the servo ramp: a set point every servo period, each held by the
+/// drives for that period's share of the physics substeps.
+pub(crate) fn step_servoed(
+    scene: &mut Scene,
+    ramp: &mut JointRamp,
+    target: &[f32],
+) -> std::result::Result<(), SimError> {
+    let substeps = scene.config().physics.substeps;
+    let ticks = servo_ticks(scene.control_period(), ramp.caps().2 as f32 * 1000.0)
+        .min(substeps)
+        .max(1);
+    let target: Vec<f64> = target.iter().map(|&v| v as f64).collect();
+    let mut done = 0;
+    for k in 1..=ticks {
+        let set_point = ramp.next(&target).expect("the ramp starts at reset");
+        let q: Vec<f32> = set_point.iter().map(|&v| v as f32).collect();
+        scene.set_arm_targets(&q)?;
+        // Spread the substeps over the ticks (8 over 4: two each).
+        let until = substeps * k / ticks;
+        while done < until {
+            scene.step_physics()?;
+            done += 1;
+        }
+    }
+    scene.check_finite()
 }
 
 /// The joint-space set-point ramp (see the [module](self) documentation).
