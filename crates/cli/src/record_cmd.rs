@@ -136,7 +136,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
             }
         }
     }
-    let bytes = encode_gif(&frames, w, h, env.metadata().render_fps)?;
+    let bytes = fairgrasp_env::render::video::encode_gif(&frames, w, h, env.metadata().render_fps)?;
     fairgrasp_rl::save_util::write_atomic(&args.out, &bytes)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     println!(
@@ -193,21 +193,4 @@ fn captioned(mut rgb: Vec<u8>, w: u32, h: u32, c: &Caption) -> Result<Vec<u8>> {
             .map_err(|e| anyhow::anyhow!("cannot draw the overlay: {e}"))?;
     }
     Ok(rgb)
-}
-
-/// An endlessly looping GIF at the environment's control rate (GIF delays are in 1/100 s).
-fn encode_gif(frames: &[Vec<u8>], w: u32, h: u32, fps: f32) -> Result<Vec<u8>> {
-    let mut bytes = Vec::new();
-    {
-        let mut encoder = gif::Encoder::new(&mut bytes, w as u16, h as u16, &[])?;
-        encoder.set_repeat(gif::Repeat::Infinite)?;
-        let delay = (100.0 / fps.max(1.0)).round().max(2.0) as u16;
-        for rgb in frames {
-            // NeuQuant at speed 10: a palette per frame, 2–3 ms at 320×240.
-            let mut frame = gif::Frame::from_rgb_speed(w as u16, h as u16, rgb, 10);
-            frame.delay = delay;
-            encoder.write_frame(&frame)?;
-        }
-    }
-    Ok(bytes)
 }

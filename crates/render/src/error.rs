@@ -14,6 +14,9 @@ pub enum RenderError {
     /// The scene has more parts than the segmentation ids have room for.
     #[error("segmentation: {0}")]
     Segmentation(String),
+    /// A video could not be encoded.
+    #[error("video: {0}")]
+    Video(String),
     #[error("cannot write {path}: {problem}")]
     Write { path: PathBuf, problem: String },
 }

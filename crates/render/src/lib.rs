@@ -29,6 +29,7 @@ pub mod raster;
 pub mod renderer;
 pub mod scene_mesh;
 pub mod segment;
+pub mod video;
 
 pub use camera::{Camera, CameraConfig};
 pub use error::{RenderError, Result};

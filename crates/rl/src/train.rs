@@ -53,6 +53,11 @@ pub struct EvalConfig {
     pub episodes: u32,
     /// Stop training once the evaluation success rate reaches this.
     pub success_threshold: Option<f32>,
+    /// After each evaluation, play its first episode again with the `[render]` camera and
+    /// write it as `videos/eval_<steps>.gif` in the run directory (arm tasks).
+    pub record: bool,
+    /// Width and height of those videos.
+    pub record_size: [u32; 2],
 }
 
 impl Default for EvalConfig {
@@ -61,6 +66,8 @@ impl Default for EvalConfig {
             freq: 50_000,
             episodes: 20,
             success_threshold: None,
+            record: false,
+            record_size: [320, 240],
         }
     }
 }
@@ -164,6 +171,13 @@ impl TrainConfig {
         if self.eval.freq > 0 && self.eval.episodes == 0 {
             return bad("eval.episodes", "must be at least 1 when evaluating");
         }
+        let [w, h] = self.eval.record_size;
+        if !((16..=1920).contains(&w) && (16..=1080).contains(&h)) {
+            return bad(
+                "eval.record_size",
+                "must be [width, height] within 16×16 and 1920×1080",
+            );
+        }
         self.normalize
             .validate()
             .map_err(|problem| RlError::Config {
@@ -238,6 +252,53 @@ pub fn evaluate(
         episodes,
         final_extras,
     })
+}
+
+/// Plays one deterministic episode (seed `seed`) of `env_id` rendered by its `[render]`
+/// camera at `size`, and returns it as a GIF.
+pub fn record_episode(
+    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    env_id: &str,
+    env_config: &toml::Table,
+    seed: u64,
+    size: [u32; 2],
+) -> Result<Vec<u8>> {
+    let mut table = env_config.clone();
+    for item in [
+        "task.render_mode=\"rgb_array\"".to_string(),
+        format!("render.width={}", size[0]),
+        format!("render.height={}", size[1]),
+    ] {
+        fairgrasp_env::config::apply_override(&mut table, &item)?;
+    }
+    let mut env = RescaleAction::new(registry::make(env_id, &table)?)?;
+    let (mut obs, _) = env.reset(Some(seed))?;
+    let mut frames = Vec::new();
+    let mut frame = |env: &mut RescaleAction<Box<dyn fairgrasp_env::Env>>| -> Result<()> {
+        match env.render()? {
+            Some(fairgrasp_env::core::Frame::Rgb { data, .. }) => {
+                frames.push(data);
+                Ok(())
+            }
+            _ => Err(RlError::Other(format!(
+                "eval.record: {env_id} renders no RGB image (only the arm tasks do)"
+            ))),
+        }
+    };
+    loop {
+        frame(&mut env)?;
+        let mut action = policy(&obs)?;
+        env.action_space().clip(&mut action);
+        let step = env.step(&action)?;
+        obs = step.obs;
+        if step.terminated || step.truncated {
+            frame(&mut env)?;
+            break;
+        }
+    }
+    let fps = env.metadata().render_fps;
+    fairgrasp_env::render::video::encode_gif(&frames, size[0], size[1], fps)
+        .map_err(|e| RlError::Other(format!("eval.record: {e}")))
 }
 
 /// Progress reported to the caller (for a progress bar).
@@ -551,6 +612,18 @@ fn run<A: Algorithm>(
                     .iter()
                     .map(|(name, v)| (format!("eval/{name}"), v)),
             );
+            if config.eval.record {
+                let gif = record_episode(
+                    &mut |obs| policy.act(obs, true),
+                    &config.env_id,
+                    &config.env,
+                    EVAL_SEED_BASE,
+                    config.eval.record_size,
+                )?;
+                let path = run_dir.join("videos").join(format!("eval_{steps}.gif"));
+                std::fs::create_dir_all(run_dir.join("videos")).map_err(io)?;
+                write_atomic(&path, &gif).map_err(io)?;
+            }
             tb.add_scalars(steps, &scalars).map_err(io)?;
             let mut row: Vec<(&str, f64)> = scalars
                 .iter()

@@ -122,6 +122,7 @@ fn training_config_errors_name_the_key() {
         ),
         ("[env.task]\nmax_joint_delta = 9.0\n", "max_joint_delta"),
         ("env_id = \"FaArmJuggle-v9\"\n", "FaArmJuggle-v9"),
+        ("[eval]\nrecord_size = [8, 8]\n", "eval.record_size"),
     ] {
         let err = TrainConfig::from_toml_str(text, &[])
             .err()
@@ -308,4 +309,43 @@ fn the_driver_runs_the_pick_and_place_and_sorting_tasks() {
         // chose it, step for step.
         assert_eq!(Some(again), summary.best, "{id}");
     }
+}
+
+#[test]
+fn eval_record_writes_a_gif_of_an_evaluation_episode_per_evaluation() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = tiny_config(1024);
+    config.eval.record = true;
+    config.eval.record_size = [48, 32];
+    train(&config, dir.path(), |_| {}).unwrap();
+    for steps in [512, 1024] {
+        let path = dir.path().join(format!("videos/eval_{steps}.gif"));
+        let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut options = gif::DecodeOptions::new();
+        options.set_color_output(gif::ColorOutput::RGBA);
+        let mut decoder = options.read_info(bytes.as_slice()).unwrap();
+        assert_eq!((decoder.width(), decoder.height()), (48, 32));
+        let mut frames = 0;
+        while decoder.read_next_frame().unwrap().is_some() {
+            frames += 1;
+        }
+        // A frame per state of the 20-step episode (fewer if it ended early), the last one
+        // included.
+        assert!((2..=21).contains(&frames), "{frames} frames");
+    }
+    // Recording renders a separate replay: the evaluation's figures match a run without it.
+    let plain = tempfile::tempdir().unwrap();
+    train(&tiny_config(1024), plain.path(), |_| {}).unwrap();
+    let eval_rows = |run: &Path| {
+        std::fs::read_to_string(run.join("progress.csv"))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.contains(",,"))
+            .count()
+    };
+    assert_eq!(eval_rows(dir.path()), eval_rows(plain.path()));
+    assert_eq!(
+        std::fs::read(dir.path().join("best/model.safetensors")).unwrap(),
+        std::fs::read(plain.path().join("best/model.safetensors")).unwrap()
+    );
 }
