@@ -109,8 +109,9 @@ def settle(page, frames=3):
 
 
 def arm_pixels(px):
-    # The FR5's links are light grey/white; the table is brown and the background blue-grey.
-    return sum(1 for r, g, b in px if min(r, g, b) > 170 and max(r, g, b) - min(r, g, b) < 25)
+    # The FR5's links are neutral light grey/white; the table is brown, the background blue-grey
+    # (205, 214, 224), which the neutrality test leaves out.
+    return sum(1 for r, g, b in px if min(r, g, b) > 120 and max(r, g, b) - min(r, g, b) < 8)
 
 
 def changed(a, b):
@@ -128,7 +129,7 @@ def main():
         assert "http://" in line, f"fairgrasp view printed {line!r}"
         url = line[line.index("http://") :].strip()
         args = [chrome, "--headless=new", "--disable-gpu", "--remote-debugging-port=0",
-                "--remote-allow-origins=*", f"--user-data-dir={profile}", "--window-size=1040,620",
+                "--remote-allow-origins=*", f"--user-data-dir={profile}", "--window-size=1000,580",
                 "--hide-scrollbars", "about:blank"]
         if os.geteuid() == 0:
             args.insert(1, "--no-sandbox")
@@ -142,6 +143,8 @@ def main():
         targets = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list"))
         page = Page(next(t for t in targets if t["type"] == "page")["webSocketDebuggerUrl"])
         page.call("Page.enable")
+        # The window size flag leaves room for browser chrome even headless; fix the viewport.
+        page.call("Emulation.setDeviceMetricsOverride", width=1000, height=580, deviceScaleFactor=1, mobile=False)
         page.call("Page.navigate", url=url)
         page.wait_for("typeof $ === 'function' && $('frame').naturalWidth > 0 && $('joint-0') !== null", "the page")
         settle(page)
@@ -150,10 +153,6 @@ def main():
         arm = arm_pixels(first)
         print(f"arm-coloured pixels: {arm} of {len(first)}")
         assert arm > 1500, "the arm is not visible"
-        if screenshot:
-            shot = page.call("Page.captureScreenshot", format="png")["data"]
-            with open(screenshot, "wb") as f:
-                f.write(base64.b64decode(shot))
 
         page.click(*page.centre("step"))
         page.wait_for("state && state.step >= 1", "a step")
@@ -162,10 +161,18 @@ def main():
         n = changed(first, stepped)
         print(f"pixels changed by Step: {n}")
         assert n > 0, "Step changed nothing on screen"
+        # The page after a step (reward terms filled in) is the README's screenshot.
+        page.wait_for("$('info').rows.length > 2", "the reward terms")
+        if screenshot:
+            shot = page.call("Page.captureScreenshot", format="png")["data"]
+            with open(screenshot, "wb") as f:
+                f.write(base64.b64decode(shot))
 
         # A click at 80% along slider 1 sets joint 1 far from its home angle.
+        start = page.eval("state.joints[0].degrees")
         page.click(*page.centre("joint-0", 0.8))
-        page.wait_for("state && state.mode === 'manual' && Math.abs(state.joints[0].degrees - Number($('joint-0').value)) < 3",
+        page.wait_for(f"state.mode === 'manual' && Math.abs(state.joints[0].degrees - {start}) > 20"
+                      " && Math.abs(state.joints[0].degrees - Number($('joint-0').value)) < 3",
                       "joint 1 to reach the slider")
         settle(page)
         moved, _ = page.scene_shot()

@@ -6,6 +6,7 @@ let state = null;
 let frameNo = 0;
 let sending = false;
 let pendingJoints = null;
+let switching = false; // a slider moved outside manual mode; the switch is under way
 
 function frameUrl() {
   const q = Object.entries(cam).map(([k, v]) => `${k}=${v.toFixed(4)}`).join("&");
@@ -54,8 +55,14 @@ function buildJoints(joints) {
     const value = document.createElement("span");
     value.id = `joint-${i}-value`;
     input.addEventListener("input", async () => {
-      if (state && state.mode !== "manual") await send({ cmd: "mode", mode: "manual" });
+      // Read the sliders now: a state poll answered before the mode change lands would move
+      // them back to the arm's angles.
       const all = state.joints.map((_, k) => Number($(`joint-${k}`).value));
+      if (state.mode !== "manual") {
+        switching = true;
+        await send({ cmd: "mode", mode: "manual" });
+        switching = false;
+      }
       sendJoints(all);
     });
     row.append(name, input, value);
@@ -78,9 +85,7 @@ function show(s) {
   s.joints.forEach((j, i) => {
     const input = $(`joint-${i}`);
     // In manual mode the sliders hold the targets the user set; otherwise they follow the arm.
-    if (s.mode !== "manual" || document.activeElement !== input) {
-      if (s.mode !== "manual") input.value = j.degrees;
-    }
+    if (s.mode !== "manual" && !switching) input.value = j.degrees;
     $(`joint-${i}-value`).textContent = j.degrees.toFixed(1);
   });
   $("gripper").textContent = s.gripper_open ? "Close gripper" : "Open gripper";
