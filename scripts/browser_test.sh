@@ -27,7 +27,7 @@ fi
 
 bin=${FAIRGRASP:-}
 if [ -z "$bin" ]; then
-  cargo build -q -p fairgrasp-cli
+  cargo build -q --locked -p fairgrasp-cli
   bin=$target_dir/debug/fairgrasp
 fi
 

@@ -3,6 +3,7 @@
 //! and an orbit camera. Frames come from the CPU renderer; every asset is in the binary.
 
 mod camera;
+mod scene_env;
 mod server;
 mod session;
 #[cfg(test)]
@@ -102,7 +103,7 @@ pub fn start(args: &ViewArgs) -> Result<(Viewer, std::thread::JoinHandle<()>)> {
             table
         }
     };
-    let env = session::make_env(&id, &table)?;
+    let env = scene_env::make_env(&id, &table)?;
     let twin = match &args.twin {
         Some(addr) => Some(twin::TwinView::connect(addr, env.scene().config().clone())?),
         None => None,

@@ -2,55 +2,18 @@
 //! the renderer. It lives on its own thread; the HTTP thread sends it [`Request`]s.
 
 use super::camera::Orbit;
+use super::scene_env::SceneEnv;
 use super::twin::TwinView;
 use anyhow::{Context, Result, bail};
-use fairgrasp_env::arm::{ActionMode, ArmEnv, ArmEnvConfig, Task};
-use fairgrasp_env::config::from_table;
-use fairgrasp_env::core::{Env, Info};
-use fairgrasp_env::tasks::{grasp::Grasp, pick_place::PickPlace, sort::Sort};
+use fairgrasp_env::core::Info;
 use fairgrasp_render::{Camera, Renderer};
 use fairgrasp_rl::policies::Policy;
-use fairgrasp_sim::scene::Scene;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 use serde_json::{Value, json};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::time::{Duration, Instant};
-
-/// An environment whose scene can be drawn: the arm tasks.
-pub trait SceneEnv: Env {
-    fn scene(&self) -> &Scene;
-    /// Whether actions are joint deltas (manual mode needs them).
-    fn joint_actions(&self) -> bool;
-}
-
-impl<T: Task> SceneEnv for ArmEnv<T> {
-    fn scene(&self) -> &Scene {
-        ArmEnv::scene(self)
-    }
-    fn joint_actions(&self) -> bool {
-        self.config().control.action_mode == ActionMode::Joint
-    }
-}
-
-fn arm<T: Task>(table: &toml::Table) -> Result<Box<dyn SceneEnv>> {
-    let config: ArmEnvConfig<T::Settings, T::Reward> = from_table(table.clone())?;
-    Ok(Box::new(ArmEnv::<T>::new(config)?))
-}
-
-/// Builds arm task `id` (the viewer draws a scene, so the classic-control tasks are out).
-pub fn make_env(id: &str, table: &toml::Table) -> Result<Box<dyn SceneEnv>> {
-    match id {
-        "FaArmGrasp-v0" => arm::<Grasp>(table),
-        "FaArmPickPlace-v0" => arm::<PickPlace>(table),
-        "FaArmSort-v0" => arm::<Sort>(table),
-        _ => bail!(
-            "`fairgrasp view` shows the arm tasks (FaArmGrasp-v0, FaArmPickPlace-v0, \
-             FaArmSort-v0), not {id}"
-        ),
-    }
-}
 
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -82,12 +45,15 @@ pub enum Control {
     },
 }
 
+/// A rendered frame: width, height and RGB bytes (row-major).
+pub type RgbFrame = (u32, u32, Vec<u8>);
+
 /// What the HTTP thread asks; each carries where the answer goes.
 pub enum Request {
     Control(Control, Sender<Result<(), String>>),
     State(Sender<Value>),
     /// An RGB frame (width, height, bytes) seen from the orbit.
-    Frame(Orbit, Sender<Result<(u32, u32, Vec<u8>), String>>),
+    Frame(Orbit, Sender<Result<RgbFrame, String>>),
 }
 
 /// Most control steps one `joints` command runs while paused (6 rad at the default 0.05 rad a
@@ -277,7 +243,7 @@ impl Session {
     }
 
     fn reset(&mut self) -> Result<()> {
-        let seed = self.seed + self.episode as u64;
+        let seed = self.seed.wrapping_add(self.episode as u64);
         let (obs, info) = self.env.reset(Some(seed))?;
         self.obs = obs;
         self.info = Some(info);
@@ -297,8 +263,14 @@ impl Session {
             return Ok(());
         }
         if self.done {
-            // The ended episode's last state stayed on screen until now.
+            // The ended episode's last state stayed on screen until now. A user jogging the
+            // arm keeps their targets across the reset.
+            let kept =
+                (self.mode == Mode::Manual).then(|| (self.targets.clone(), self.gripper_open));
             self.reset()?;
+            if let Some((targets, open)) = kept {
+                (self.targets, self.gripper_open) = (targets, open);
+            }
         }
         let space = self.env.action_space().clone();
         let mut action = match self.mode {
@@ -331,7 +303,7 @@ impl Session {
         Ok(())
     }
 
-    fn frame(&mut self, orbit: &Orbit) -> Result<(u32, u32, Vec<u8>)> {
+    fn frame(&mut self, orbit: &Orbit) -> Result<RgbFrame> {
         if let (Mode::Twin, Some(twin)) = (self.mode, self.twin.as_mut()) {
             return twin.frame(orbit, self.size);
         }

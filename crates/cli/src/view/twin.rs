@@ -2,6 +2,7 @@
 //! over the controller's CNDE stream; a scene of its own is posed at them and rendered.
 
 use super::camera::Orbit;
+use super::session::RgbFrame;
 use anyhow::{Context, Result};
 use fairgrasp_deploy::fairino::cnde::{CndeClient, DEFAULT_PERIOD_MS, default_state_names};
 use fairgrasp_render::{Camera, Renderer};
@@ -65,7 +66,7 @@ impl TwinView {
     }
 
     /// The twin's arm seen from `orbit`: (width, height, RGB).
-    pub fn frame(&mut self, orbit: &Orbit, size: (u32, u32)) -> Result<(u32, u32, Vec<u8>)> {
+    pub fn frame(&mut self, orbit: &Orbit, size: (u32, u32)) -> Result<RgbFrame> {
         self.update()?;
         let config = orbit.camera(size.0, size.1);
         let renderer = match &mut self.renderer {
