@@ -57,7 +57,11 @@ fn control(viewer: &Viewer, command: &str) -> (u16, String) {
 
 /// The frame's RGB bytes, checked to be a PNG of the configured size.
 fn frame(viewer: &Viewer) -> Vec<u8> {
-    let (status, body) = http(viewer, "GET", "/frame.png?az=-40&el=20&dist=1.6", "");
+    frame_from(viewer, "az=-40&el=20&dist=1.6")
+}
+
+fn frame_from(viewer: &Viewer, camera: &str) -> Vec<u8> {
+    let (status, body) = http(viewer, "GET", &format!("/frame.png?{camera}"), "");
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
     let decoder = png::Decoder::new(std::io::Cursor::new(body));
     let mut reader = decoder.read_info().unwrap();
@@ -83,6 +87,20 @@ fn frames_state_step_and_bad_requests() {
     let first = frame(&viewer);
     let colours: std::collections::HashSet<&[u8]> = first.chunks(3).collect();
     assert!(colours.len() > 10, "the frame is (nearly) one colour");
+
+    // The orbit camera: another azimuth and a nearer camera see another picture.
+    let turned = frame_from(&viewer, "az=60&el=20&dist=1.6");
+    assert!(
+        changed_pixels(&first, &turned) > 2000,
+        "the azimuth changed little: {}",
+        changed_pixels(&first, &turned)
+    );
+    let nearer = frame_from(&viewer, "az=-40&el=20&dist=0.8");
+    assert!(
+        changed_pixels(&first, &nearer) > 2000,
+        "the distance changed little: {}",
+        changed_pixels(&first, &nearer)
+    );
 
     let before = state(&viewer);
     assert_eq!(before["step"], 0);

@@ -114,7 +114,12 @@ async function refresh() {
 
 for (const c of ["play", "pause", "step", "reset"]) $(c).addEventListener("click", () => send({ cmd: c }));
 $("mode").addEventListener("change", () => send({ cmd: "mode", mode: $("mode").value }));
-$("gripper").addEventListener("click", () => send({ cmd: "gripper", open: !state.gripper_open }));
+// The gripper button jogs too: it switches to manual mode first, like the sliders.
+$("gripper").addEventListener("click", async () => {
+  const open = !state.gripper_open;
+  if (state.mode !== "manual" && !(await send({ cmd: "mode", mode: "manual" }))) return;
+  send({ cmd: "gripper", open });
+});
 
 // Orbit: drag turns the camera around the target; the wheel moves it nearer or farther.
 let drag = null;
