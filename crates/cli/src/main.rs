@@ -15,6 +15,7 @@ mod record_cmd;
 mod robustness_cmd;
 mod train_cmd;
 mod twin_cmd;
+mod view;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -68,6 +69,9 @@ enum Command {
     Bench(bench::BenchCommand),
     /// Serve a digital twin of the FAIRINO controller (XML-RPC 20003, CNDE 20005), backed by the simulator.
     Twin(twin_cmd::TwinArgs),
+    /// Serve a page on loopback that shows the scene live: play, step, reset, policy, random or
+    /// manual (joint sliders) mode, the last step's reward terms, an orbit camera.
+    View(view::ViewArgs),
 }
 
 /// Scene settings shared by the commands that build a scene.
@@ -167,6 +171,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(args) => commission_cmd::calibrate(&args),
         Command::JogTest(args) => commission_cmd::jog(&args),
         Command::Twin(args) => twin_cmd::run(&args),
+        Command::View(args) => view::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
