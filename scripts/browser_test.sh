@@ -18,6 +18,12 @@ if [ -z "$chrome" ]; then
   fi
 fi
 
+# The venv below needs ensurepip (Debian's python3-venv).
+if ! python3 -c 'import ensurepip' 2>/dev/null && [ "$(id -u)" = 0 ] && [ "${CI:-}" = true ]; then
+  apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends python3-venv >/dev/null
+fi
+
 target_dir=$(cargo metadata --format-version 1 --no-deps | python3 -c 'import json,sys; print(json.load(sys.stdin)["target_directory"])')
 venv=${BROWSER_TEST_VENV:-$target_dir/browser-test-venv}
 if [ ! -x "$venv/bin/python" ]; then
