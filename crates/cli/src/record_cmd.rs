@@ -26,7 +26,7 @@ pub struct RecordArgs {
     /// First episode seed (episode k uses seed + k); held-out by default.
     #[arg(long, default_value_t = HELD_OUT_SEED_BASE)]
     pub seed: u64,
-    /// Where to write: `.gif`.
+    /// Where to write: `.gif`, or `.mp4` (needs ffmpeg on the PATH).
     #[arg(long, default_value = "episodes.gif")]
     pub out: PathBuf,
     /// Frame size (the `[render]` camera's width and height).
@@ -49,15 +49,25 @@ struct Caption {
 
 pub fn run(args: &RecordArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    match args.out.extension().and_then(|e| e.to_str()) {
-        Some("gif") => {}
-        Some("mp4") => bail!(
-            "{}: MP4 needs an external encoder (ffmpeg), which `fairgrasp record` does not \
-             drive yet; write a .gif",
-            args.out.display()
-        ),
-        _ => bail!("{}: --out must end in .gif", args.out.display()),
-    }
+    let mp4 = match args.out.extension().and_then(|e| e.to_str()) {
+        Some("gif") => false,
+        Some("mp4") => {
+            // No well-kept pure-Rust H.264 encoder exists; ffmpeg is the field's encoder.
+            if std::process::Command::new("ffmpeg")
+                .arg("-version")
+                .output()
+                .is_err()
+            {
+                bail!(
+                    "{}: MP4 needs ffmpeg on the PATH, and there is none (install ffmpeg, or \
+                     write a .gif)",
+                    args.out.display()
+                );
+            }
+            true
+        }
+        _ => bail!("{}: --out must end in .gif or .mp4", args.out.display()),
+    };
     anyhow::ensure!(
         (16..=1920).contains(&args.width) && (16..=1080).contains(&args.height),
         "--width and --height must be within 16×16 and 1920×1080, got {}×{}",
@@ -136,9 +146,14 @@ pub fn run(args: &RecordArgs) -> Result<()> {
             }
         }
     }
-    let bytes = fairgrasp_env::render::video::encode_gif(&frames, w, h, env.metadata().render_fps)?;
-    fairgrasp_rl::save_util::write_atomic(&args.out, &bytes)
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let fps = env.metadata().render_fps;
+    if mp4 {
+        encode_mp4(&frames, w, h, fps, &args.out)?;
+    } else {
+        let bytes = fairgrasp_env::render::video::encode_gif(&frames, w, h, fps)?;
+        fairgrasp_rl::save_util::write_atomic(&args.out, &bytes)
+            .with_context(|| format!("cannot write {}", args.out.display()))?;
+    }
     println!(
         "wrote {} ({} frames, {w}×{h}): {} episode(s) of {id}, {successes} successful, {}",
         args.out.display(),
@@ -193,4 +208,61 @@ fn captioned(mut rgb: Vec<u8>, w: u32, h: u32, c: &Caption) -> Result<Vec<u8>> {
             .map_err(|e| anyhow::anyhow!("cannot draw the overlay: {e}"))?;
     }
     Ok(rgb)
+}
+
+/// H.264 in MP4 through ffmpeg, raw RGB frames on its stdin; written next to `out` and renamed
+/// into place, so a failed encode leaves no partial file.
+fn encode_mp4(frames: &[Vec<u8>], w: u32, h: u32, fps: f32, out: &std::path::Path) -> Result<()> {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let tmp = out.with_extension("partial.mp4");
+    let mut child = Command::new("ffmpeg")
+        .args([
+            "-y",
+            "-loglevel",
+            "error",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "rgb24",
+        ])
+        .args([
+            "-s",
+            &format!("{w}x{h}"),
+            "-r",
+            &format!("{fps}"),
+            "-i",
+            "-",
+        ])
+        // yuv420p needs even sizes; players expect it.
+        .args([
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+            "-pix_fmt",
+            "yuv420p",
+        ])
+        .arg(&tmp)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("cannot start ffmpeg")?;
+    {
+        let mut stdin = child.stdin.take().context("ffmpeg's stdin")?;
+        for frame in frames {
+            if stdin.write_all(frame).is_err() {
+                break; // ffmpeg stopped reading: its error is reported below.
+            }
+        }
+    }
+    let result = child.wait_with_output().context("ffmpeg did not finish")?;
+    if !result.status.success() {
+        let _ = std::fs::remove_file(&tmp);
+        bail!(
+            "ffmpeg failed to write {}: {}",
+            out.display(),
+            String::from_utf8_lossy(&result.stderr).trim()
+        );
+    }
+    std::fs::rename(&tmp, out).with_context(|| format!("cannot write {}", out.display()))
 }
