@@ -105,3 +105,52 @@ pub fn model_env(policy: &Policy, overrides: &[String]) -> Result<toml::Table> {
         .with_context(|| format!("invalid settings for {} (--set or {path})", policy.env_id()))?;
     Ok(table)
 }
+
+/// The policy (if a model is given), the env id (`id`, else the model's, else the grasp task)
+/// and its settings table with `overrides` applied and checked: what `record` and `view` run.
+pub fn policy_and_env(
+    id: Option<&str>,
+    model: Option<&std::path::Path>,
+    overrides: &[String],
+) -> Result<(Option<Policy>, String, toml::Table)> {
+    let policy = match model {
+        Some(path) => Some(
+            Policy::load(path).with_context(|| format!("cannot load model {}", path.display()))?,
+        ),
+        None => None,
+    };
+    let id = match (id, &policy) {
+        (Some(id), _) => id.to_string(),
+        (None, Some(p)) => p.env_id().to_string(),
+        (None, None) => fairgrasp_env::ENV_ID.to_string(),
+    };
+    let table = match &policy {
+        Some(p) => {
+            anyhow::ensure!(
+                p.env_id() == id,
+                "the model was trained on {}, not {id}",
+                p.env_id()
+            );
+            model_env(p, overrides)?
+        }
+        None => {
+            let mut table = toml::Table::new();
+            for item in overrides {
+                fairgrasp_env::config::apply_override(&mut table, item).context("invalid --set")?;
+            }
+            fairgrasp_env::registry::validate(&id, &table)
+                .with_context(|| format!("invalid settings for {id}"))?;
+            table
+        }
+    };
+    Ok((policy, id, table))
+}
+
+/// Frame sizes `record` and `view` accept.
+pub fn check_frame_size(width: u32, height: u32) -> Result<()> {
+    anyhow::ensure!(
+        (16..=1920).contains(&width) && (16..=1080).contains(&height),
+        "--width and --height must be within 16×16 and 1920×1080, got {width}×{height}"
+    );
+    Ok(())
+}

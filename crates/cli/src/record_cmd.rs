@@ -1,12 +1,11 @@
 //! `fairgrasp record`: episodes of a trained policy (or a random one) as an animated GIF, each
 //! frame from the CPU renderer with a small overlay: episode, step, return so far, success.
 
-use crate::eval_cmd::model_env;
+use crate::eval_cmd::{check_frame_size, policy_and_env};
 use anyhow::{Context, Result, bail};
 use fairgrasp_env::core::{Env, Frame};
+use fairgrasp_env::registry;
 use fairgrasp_env::wrappers::RescaleAction;
-use fairgrasp_env::{config::apply_override, registry};
-use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::HELD_OUT_SEED_BASE;
 use plotters::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -68,48 +67,15 @@ pub fn run(args: &RecordArgs) -> Result<()> {
         }
         _ => bail!("{}: --out must end in .gif or .mp4", args.out.display()),
     };
-    anyhow::ensure!(
-        (16..=1920).contains(&args.width) && (16..=1080).contains(&args.height),
-        "--width and --height must be within 16×16 and 1920×1080, got {}×{}",
-        args.width,
-        args.height
-    );
-    let mut policy = match &args.model {
-        Some(path) => Some(
-            Policy::load(path).with_context(|| format!("cannot load model {}", path.display()))?,
-        ),
-        None => None,
-    };
-    let id = match (&args.id, &policy) {
-        (Some(id), _) => id.clone(),
-        (None, Some(p)) => p.env_id().to_string(),
-        (None, None) => fairgrasp_env::ENV_ID.to_string(),
-    };
+    check_frame_size(args.width, args.height)?;
     let mut overrides = vec![
         "task.render_mode=rgb_array".to_string(),
         format!("render.width={}", args.width),
         format!("render.height={}", args.height),
     ];
     overrides.extend(args.overrides.iter().cloned());
-    let table = match &policy {
-        Some(p) => {
-            anyhow::ensure!(
-                p.env_id() == id,
-                "the model was trained on {}, not {id}",
-                p.env_id()
-            );
-            model_env(p, &overrides)?
-        }
-        None => {
-            let mut table = toml::Table::new();
-            for item in &overrides {
-                apply_override(&mut table, item).context("invalid --set")?;
-            }
-            registry::validate(&id, &table)
-                .with_context(|| format!("invalid settings for {id}"))?;
-            table
-        }
-    };
+    let (mut policy, id, table) =
+        policy_and_env(args.id.as_deref(), args.model.as_deref(), &overrides)?;
     let mut env = RescaleAction::new(registry::make(&id, &table)?)?;
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let mut frames: Vec<Vec<u8>> = Vec::new();

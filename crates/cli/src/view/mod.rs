@@ -10,10 +10,8 @@ mod session;
 mod tests;
 mod twin;
 
-use crate::eval_cmd::model_env;
+use crate::eval_cmd::{check_frame_size, policy_and_env};
 use anyhow::{Context, Result};
-use fairgrasp_env::{config::apply_override, registry};
-use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::HELD_OUT_SEED_BASE;
 use session::Session;
 use std::net::{IpAddr, SocketAddr};
@@ -67,42 +65,9 @@ impl Viewer {
 
 /// Builds the session and starts the simulation and HTTP threads.
 pub fn start(args: &ViewArgs) -> Result<(Viewer, std::thread::JoinHandle<()>)> {
-    anyhow::ensure!(
-        (16..=1920).contains(&args.width) && (16..=1080).contains(&args.height),
-        "--width and --height must be within 16×16 and 1920×1080, got {}×{}",
-        args.width,
-        args.height
-    );
-    let policy = match &args.model {
-        Some(path) => Some(
-            Policy::load(path).with_context(|| format!("cannot load model {}", path.display()))?,
-        ),
-        None => None,
-    };
-    let id = match (&args.id, &policy) {
-        (Some(id), _) => id.clone(),
-        (None, Some(p)) => p.env_id().to_string(),
-        (None, None) => fairgrasp_env::ENV_ID.to_string(),
-    };
-    let table = match &policy {
-        Some(p) => {
-            anyhow::ensure!(
-                p.env_id() == id,
-                "the model was trained on {}, not {id}",
-                p.env_id()
-            );
-            model_env(p, &args.overrides)?
-        }
-        None => {
-            let mut table = toml::Table::new();
-            for item in &args.overrides {
-                apply_override(&mut table, item).context("invalid --set")?;
-            }
-            registry::validate(&id, &table)
-                .with_context(|| format!("invalid settings for {id}"))?;
-            table
-        }
-    };
+    check_frame_size(args.width, args.height)?;
+    let (policy, id, table) =
+        policy_and_env(args.id.as_deref(), args.model.as_deref(), &args.overrides)?;
     let env = scene_env::make_env(&id, &table)?;
     let twin = match &args.twin {
         Some(addr) => Some(twin::TwinView::connect(addr, env.scene().config().clone())?),
