@@ -4,6 +4,7 @@
 use anyhow::{Context, Result};
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{EVAL_SEED_BASE, HELD_OUT_SEED_BASE, evaluate};
+use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -25,6 +26,11 @@ pub struct EvalArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Write every observation the policy saw and the action it chose, one JSON object per
+    /// line (`{"obs": [...], "action": [...]}`), to this file: for comparing other runtimes
+    /// (the Python package, an ONNX export) with this one.
+    #[arg(long, value_name = "FILE.jsonl")]
+    pub trace: Option<PathBuf>,
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
@@ -44,13 +50,32 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     }
     let started = std::time::Instant::now();
     let env_id = policy.env_id().to_string();
+    let mut trace = match &args.trace {
+        Some(path) => Some(std::io::BufWriter::new(
+            std::fs::File::create(path)
+                .with_context(|| format!("cannot create {}", path.display()))?,
+        )),
+        None => None,
+    };
     let result = evaluate(
-        &mut |obs| policy.act(obs, true),
+        &mut |obs| {
+            let action = policy.act(obs, true)?;
+            if let Some(out) = &mut trace {
+                let line = serde_json::json!({ "obs": obs, "action": action });
+                writeln!(out, "{line}").map_err(|e| {
+                    fairgrasp_rl::error::RlError::Other(format!("writing the trace: {e}"))
+                })?;
+            }
+            Ok(action)
+        },
         &env_id,
         &env,
         args.episodes,
         args.seed,
     )?;
+    if let Some(mut out) = trace {
+        out.flush().context("writing the trace")?;
+    }
     let seconds = started.elapsed().as_secs_f64();
     let dir = policy.dir().unwrap_or(&args.model).display().to_string();
     let meta = policy.meta();
@@ -92,18 +117,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 /// The settings of the environment a model was trained on (rebuilt through the registry by
 /// `evaluate`), with `overrides` applied and checked.
 pub fn model_env(policy: &Policy, overrides: &[String]) -> Result<toml::Table> {
-    let path = policy
-        .dir()
-        .map(|d| d.join("model.json").display().to_string())
-        .unwrap_or_else(|| "model.json".into());
-    let mut table = fairgrasp_rl::model::env_table(policy.env_config())
-        .with_context(|| format!("{path}: the environment settings"))?;
-    for item in overrides {
-        fairgrasp_env::config::apply_override(&mut table, item).context("invalid --set")?;
-    }
-    fairgrasp_env::registry::validate(policy.env_id(), &table)
-        .with_context(|| format!("invalid settings for {} (--set or {path})", policy.env_id()))?;
-    Ok(table)
+    Ok(policy.env_settings(overrides)?)
 }
 
 /// The policy (if a model is given), the env id (`id`, else the model's, else the grasp task)

@@ -2,43 +2,10 @@
 //! saving, checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
 
 use anyhow::{Context, Result, bail};
+use fairgrasp_rl::configs::{builtin_table, holds_a_run, next_free_run_dir, short_env_name};
 use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume, train};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
-
-/// The default training configurations (the files in configs/, built in so that `fairgrasp
-/// train` works from any directory).
-pub const PPO_GRASP_TOML: &str = include_str!("../../../configs/ppo_grasp.toml");
-pub const SAC_GRASP_TOML: &str = include_str!("../../../configs/sac_grasp.toml");
-pub const PPO_PICK_PLACE_TOML: &str = include_str!("../../../configs/ppo_pick_place.toml");
-pub const PPO_SORT_TOML: &str = include_str!("../../../configs/ppo_sort.toml");
-
-/// The built-in configuration for an env and algorithm: the tuned file where there is one,
-/// else the algorithm's grasp settings with the env's own defaults.
-pub fn builtin_config(env_id: &str, algo: &str) -> (&'static str, bool) {
-    match (env_id, algo) {
-        ("FaArmPickPlace-v0", "ppo") => (PPO_PICK_PLACE_TOML, true),
-        ("FaArmSort-v0", "ppo") => (PPO_SORT_TOML, true),
-        (fairgrasp_env::ENV_ID, "sac") => (SAC_GRASP_TOML, true),
-        (fairgrasp_env::ENV_ID, _) => (PPO_GRASP_TOML, true),
-        (_, "sac") => (SAC_GRASP_TOML, false),
-        _ => (PPO_GRASP_TOML, false),
-    }
-}
-
-/// `FaArmPickPlace-v0` → `pick_place`, `Pendulum-v1` → `pendulum`: run directory names.
-pub fn short_env_name(env_id: &str) -> String {
-    let stem = env_id.split("-v").next().unwrap_or(env_id);
-    let stem = stem.strip_prefix("FaArm").unwrap_or(stem);
-    let mut out = String::new();
-    for (i, c) in stem.chars().enumerate() {
-        if c.is_uppercase() && i > 0 {
-            out.push('_');
-        }
-        out.extend(c.to_lowercase());
-    }
-    out
-}
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -103,13 +70,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         None => {
             let env_id = args.env.as_deref().unwrap_or(fairgrasp_env::ENV_ID);
             let algo = args.algo.as_deref().unwrap_or("ppo");
-            let (text, tuned) = builtin_config(env_id, algo);
-            let mut table: toml::Table = text.parse().context("a built-in config")?;
-            if !tuned {
-                // The grasp file's `[env]` settings are the grasp task's: start from the
-                // env's own defaults.
-                table.remove("env");
-            }
+            let table = builtin_table(env_id, algo)?;
             (table.to_string(), "invalid settings".into())
         }
     };
@@ -146,23 +107,6 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let summary = train(&config, &run_dir, |p| reporter.update(p))?;
     reporter.finish();
     print_summary(&summary)
-}
-
-fn holds_a_run(dir: &Path) -> bool {
-    dir.join("config.toml").exists() || dir.join("checkpoints").exists()
-}
-
-/// `runs/<name>` (e.g. `ppo_grasp`), or `runs/<name>_<n>` with the first free n (like SB3's
-/// `PPO_1`, `PPO_2`, … TensorBoard runs).
-fn next_free_run_dir(root: &Path, name: &str) -> PathBuf {
-    let first = root.join(name);
-    if !holds_a_run(&first) {
-        return first;
-    }
-    (2..)
-        .map(|n| root.join(format!("{name}_{n}")))
-        .find(|dir| !holds_a_run(dir))
-        .expect("an unused run directory")
 }
 
 /// Progress bar (or, quietly, one line per evaluation).

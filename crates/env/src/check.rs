@@ -77,6 +77,12 @@ pub fn check_env<E: Env>(env: &mut E, twin: &mut E, rollout_steps: u64, seed: u6
                     .all(|(l, h)| l <= h),
                 || "observation low above high".into(),
             )
+        })
+        .and_then(|_| {
+            ensure(obs_space.is_bounded(), || {
+                "the observation space must be bounded (Gymnasium's checker warns about infinite bounds)"
+                    .into()
+            })
         }),
     );
 

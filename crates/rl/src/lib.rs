@@ -12,6 +12,7 @@
 
 pub mod algorithm;
 pub mod buffers;
+pub mod configs;
 pub mod distributions;
 pub mod error;
 pub mod logger;

@@ -23,6 +23,7 @@ use fairgrasp_env::wrappers::{
 use fairgrasp_env::{Env, NamedValues, VecEnv, VectorEnv, registry};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -336,6 +337,10 @@ pub struct TrainSummary {
     pub resumed_from: Option<u64>,
     /// Whether the run stopped early at the evaluation success threshold.
     pub reached_threshold: bool,
+    /// Whether the caller stopped the run from its progress callback ([`train_until`]: Ctrl-C
+    /// in Python, a Ray Tune scheduler).
+    #[serde(default)]
+    pub stopped: bool,
 }
 
 /// Peak resident set size of this process in MiB (Linux: `VmHWM`).
@@ -364,11 +369,24 @@ struct TrainerState {
 const TRAINER_STATE: &str = "trainer_state.json";
 const TRAINING_STATE: &str = "training_state.safetensors";
 
-/// Trains on the grasp task as configured, writing everything to `run_dir`.
+/// Trains as configured, writing everything to `run_dir`.
 pub fn train(
     config: &TrainConfig,
     run_dir: &Path,
-    on_progress: impl FnMut(&Progress),
+    mut on_progress: impl FnMut(&Progress),
+) -> Result<TrainSummary> {
+    train_until(config, run_dir, |p| {
+        on_progress(p);
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`train`], where the progress callback may stop the run: on `Break` the loop ends after that
+/// iteration and the final model, logs and summary are written as at the end of a run.
+pub fn train_until(
+    config: &TrainConfig,
+    run_dir: &Path,
+    on_progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<TrainSummary> {
     config.validate()?;
     let io = |e: std::io::Error| RlError::Other(format!("{}: {e}", run_dir.display()));
@@ -386,7 +404,19 @@ pub fn train(
 pub fn resume(
     run_dir: &Path,
     overrides: &[String],
-    on_progress: impl FnMut(&Progress),
+    mut on_progress: impl FnMut(&Progress),
+) -> Result<TrainSummary> {
+    resume_until(run_dir, overrides, |p| {
+        on_progress(p);
+        ControlFlow::Continue(())
+    })
+}
+
+/// [`resume`], where the progress callback may stop the run (see [`train_until`]).
+pub fn resume_until(
+    run_dir: &Path,
+    overrides: &[String],
+    on_progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<TrainSummary> {
     let config_path = run_dir.join("config.toml");
     let text = std::fs::read_to_string(&config_path).map_err(|e| {
@@ -436,7 +466,7 @@ fn dispatch(
     config: &TrainConfig,
     run_dir: &Path,
     checkpoint: Option<PathBuf>,
-    on_progress: impl FnMut(&Progress),
+    on_progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<TrainSummary> {
     let envs = (0..config.n_envs)
         .map(|_| registry::make(&config.env_id, &config.env).and_then(RescaleAction::new))
@@ -474,7 +504,7 @@ fn run<A: Algorithm>(
     mut algo: A,
     mut venv: VecNormalize<VecEnv<RescaleAction<Box<dyn Env>>>>,
     checkpoint: Option<PathBuf>,
-    mut on_progress: impl FnMut(&Progress),
+    mut on_progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<TrainSummary> {
     let io = |e: std::io::Error| RlError::Other(format!("{}: {e}", run_dir.display()));
     let (obs_dim, act_dim) = (venv.obs_dim(), venv.act_dim());
@@ -485,6 +515,7 @@ fn run<A: Algorithm>(
     let mut elapsed_before = 0.0;
     let mut resumed_from = None;
     let mut reached_threshold = false;
+    let mut stopped = false;
     let mut csv = CsvLogger::open(run_dir).map_err(io)?;
 
     if let Some(dir) = &checkpoint {
@@ -665,7 +696,10 @@ fn run<A: Algorithm>(
             write_checkpoint(run_dir, &algo, &meta(&algo, &venv), &state)?;
         }
         tb.flush().map_err(io)?;
-        on_progress(&progress);
+        if on_progress(&progress).is_break() {
+            stopped = true;
+            break;
+        }
         if stop {
             reached_threshold = true;
             break;
@@ -694,6 +728,7 @@ fn run<A: Algorithm>(
         run_dir: run_dir.to_path_buf(),
         resumed_from,
         reached_threshold,
+        stopped,
     };
     let json = serde_json::to_string_pretty(&summary).map_err(|e| RlError::Other(e.to_string()))?;
     write_atomic(&run_dir.join("summary.json"), json.as_bytes()).map_err(io)?;

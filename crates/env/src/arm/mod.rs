@@ -197,8 +197,13 @@ impl<T: Task> ArmEnv<T> {
             &zeros,
             &mut ObsWriter::recording(&mut obs, &mut noise_groups),
         );
+        let mut high = vec![0.0; obs.len()];
+        for (range, group) in &noise_groups {
+            high[range.clone()].fill(group.bound());
+        }
+        let low = high.iter().map(|h| -h).collect();
         Ok(Self {
-            observation_space: BoxSpace::unbounded(obs.len()),
+            observation_space: BoxSpace::new(low, high),
             noise_groups,
             action_space,
             mapper,
@@ -249,6 +254,7 @@ impl<T: Task> ArmEnv<T> {
         let mut obs = Vec::with_capacity(self.observation_space.dim());
         self.task
             .observe(state, previous_action, &mut ObsWriter::new(&mut obs));
+        self.observation_space.clip(&mut obs);
         obs
     }
 
@@ -364,6 +370,7 @@ impl<T: Task> ArmEnv<T> {
         self.task
             .observe(state, previous_action, &mut ObsWriter::new(&mut obs));
         self.add_noise(&mut obs);
+        self.observation_space.clip(&mut obs);
         obs
     }
 

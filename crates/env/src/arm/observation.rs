@@ -21,6 +21,26 @@ pub enum NoiseGroup {
 }
 
 impl NoiseGroup {
+    /// The largest magnitude a value of this group takes: the observation space's bound
+    /// (values beyond it are clipped). Physical bounds with room to spare, so that only physics
+    /// gone wild is ever clipped: the FR5's joints turn at most ±265° (4.6 rad) at up to
+    /// 180°/s (3.1 rad/s) and it reaches 0.92 m; rotation-matrix entries, quaternions, sines
+    /// and cosines lie in [-1, 1] and Euler angles in [-π, π]; flags, normalised previous
+    /// actions, goals, bins and object sizes stay within a few metres or units.
+    pub fn bound(self) -> f32 {
+        match self {
+            NoiseGroup::JointPosition => std::f32::consts::TAU,
+            NoiseGroup::JointVelocity => 50.0,
+            NoiseGroup::EePosition => 5.0,
+            NoiseGroup::EeOrientation => std::f32::consts::PI,
+            NoiseGroup::EeVelocity => 20.0,
+            NoiseGroup::ObjectPosition => 10.0,
+            NoiseGroup::ObjectOrientation => 1.0,
+            NoiseGroup::Gripper => 1.0,
+            NoiseGroup::None => 10.0,
+        }
+    }
+
     pub fn std(self, noise: &ObservationNoise) -> f32 {
         match self {
             NoiseGroup::JointPosition => noise.joint_position,

@@ -166,7 +166,8 @@ impl PointReach {
             goal: [0.0; 2],
             steps: 0,
             rng: ChaCha8Rng::seed_from_u64(0),
-            observation_space: BoxSpace::unbounded(6),
+            // Position and velocity are clamped to ±2 by the dynamics; goals lie in ±1.
+            observation_space: BoxSpace::new(vec![-2.0; 6], vec![2.0; 6]),
             action_space: BoxSpace::new(vec![-1.0; 2], vec![1.0; 2]),
             started: false,
         }

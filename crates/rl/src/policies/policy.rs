@@ -212,6 +212,28 @@ impl Policy {
         &self.meta.env
     }
 
+    /// The settings table of the environment the model was trained on, with `overrides`
+    /// (`section.key=value`) applied and checked by the registry: what evaluation rebuilds.
+    pub fn env_settings(&self, overrides: &[String]) -> Result<toml::Table> {
+        let path = self
+            .dir
+            .as_ref()
+            .map(|d| d.join("model.json").display().to_string())
+            .unwrap_or_else(|| "model.json".into());
+        let mut table = crate::model::env_table(self.env_config())
+            .map_err(|e| RlError::Model(format!("{path}: the environment settings: {e}")))?;
+        for item in overrides {
+            fairgrasp_env::config::apply_override(&mut table, item)?;
+        }
+        fairgrasp_env::registry::validate(self.env_id(), &table).map_err(|e| {
+            RlError::Model(format!(
+                "invalid settings for {} (overrides or {path}): {e}",
+                self.env_id()
+            ))
+        })?;
+        Ok(table)
+    }
+
     /// An error about acting, naming the model's directory when it has one.
     fn error(&self, problem: String) -> RlError {
         match &self.dir {

@@ -1,0 +1,55 @@
+"""Smoke runs of the examples: the design's SB3 script on our VecEnv, and the Ray Tune sweep."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from conftest import REPO
+
+
+def run_example(script: str, *args: str, cwd) -> dict:
+    done = subprocess.run(
+        [sys.executable, str(REPO / "examples" / script), *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode == 0, done.stderr[-4000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_train_sb3_runs_the_design_script_on_eight_native_envs(tmp_path, capsys):
+    summary = run_example(
+        "train_sb3.py",
+        "--total-timesteps", "20000",
+        "--n-envs", "8",
+        "--eval-freq", "8192",
+        "--eval-episodes", "3",
+        "--checkpoint-freq", "16384",
+        "--out", str(tmp_path / "run"),
+        cwd=tmp_path,
+    )
+    # n_steps 2048 × 8 envs: two rollouts.
+    assert summary["steps"] == 32768 and summary["n_envs"] == 8 and summary["fps"] > 0
+    assert [e["steps"] for e in summary["evaluations"]] == [8192, 16384, 24576, 32768]
+    run = tmp_path / "run"
+    assert (run / "models" / "best" / "best_model.zip").is_file()
+    assert (run / "models" / "final_model.zip").is_file()
+    assert list((run / "models" / "checkpoints").glob("fa_grasp_*_steps.zip"))
+    assert list((run / "tb").rglob("events.out.tfevents.*"))
+    evaluations = (run / "eval_logs" / "evaluations.npz")
+    assert evaluations.is_file()
+    with capsys.disabled():
+        print(f"\n  SB3 PPO on fairgrasp.make_vec_env(FaArmGrasp-v0, 8): {summary['fps']:.0f} steps/s "
+              f"({summary['steps']} steps in {summary['seconds']:.1f} s, updates included)")
+
+
+def test_ray_tune_sweep_smoke_runs_two_trials(tmp_path):
+    summary = run_example("ray_tune_sweep.py", "--smoke", "--storage", str(tmp_path / "ray"), cwd=tmp_path)
+    assert summary["trials"] == 2
+    assert 0.0 <= summary["best_success_rate"] <= 1.0
+    assert summary["best_timesteps"] == 4096
+    assert summary["best_config"]["learning_rate"] in (1e-4, 3e-4)
