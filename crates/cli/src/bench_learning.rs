@@ -9,7 +9,7 @@
 use anyhow::{Context, Result, bail};
 use fairgrasp_rl::logger::ProgressLog;
 use fairgrasp_rl::policies::Policy;
-use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary, evaluate};
+use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -119,16 +119,11 @@ fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
     let summary: TrainSummary =
         serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
     let curve = eval_curve(&dir.join("progress.csv"))?;
-    let mut policy = Policy::load(&dir.join("best"))?;
+    let best = dir.join("best");
+    let policy = Policy::load(&best)?;
     let env = crate::eval_cmd::model_env(&policy, &[])?;
-    let env_id = policy.env_id().to_string();
-    let held_out = evaluate(
-        &mut |obs| policy.act(obs, true),
-        &env_id,
-        &env,
-        episodes,
-        HELD_OUT_SEED_BASE,
-    )?;
+    let held_out =
+        crate::eval_cmd::evaluate_model(&policy, &best, &env, episodes, HELD_OUT_SEED_BASE, 0)?;
     Ok(RunResult {
         algo: algo.to_string(),
         dir: dir.to_path_buf(),

@@ -3,7 +3,9 @@
 
 use anyhow::{Context, Result};
 use fairgrasp_rl::policies::Policy;
-use fairgrasp_rl::train::{EVAL_SEED_BASE, HELD_OUT_SEED_BASE, evaluate};
+use fairgrasp_rl::train::{
+    Actor, EVAL_SEED_BASE, EvalResult, HELD_OUT_SEED_BASE, evaluate, evaluate_parallel,
+};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -26,6 +28,9 @@ pub struct EvalArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Threads playing the episodes (0: one per CPU); the result does not depend on it.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
     /// Write every observation the policy saw and the action it chose, one JSON object per
     /// line (`{"obs": [...], "action": [...]}`), to this file: for comparing other runtimes
     /// (the Python package, an ONNX export) with this one.
@@ -57,22 +62,31 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         )),
         None => None,
     };
-    let result = evaluate(
-        &mut |obs| {
-            let action = policy.act(obs, true)?;
-            if let Some(out) = &mut trace {
+    let result = match &mut trace {
+        // One thread: the trace lists the steps in order.
+        Some(out) => evaluate(
+            &mut |obs| {
+                let action = policy.act(obs, true)?;
                 let line = serde_json::json!({ "obs": obs, "action": action });
                 writeln!(out, "{line}").map_err(|e| {
                     fairgrasp_rl::error::RlError::Other(format!("writing the trace: {e}"))
                 })?;
-            }
-            Ok(action)
-        },
-        &env_id,
-        &env,
-        args.episodes,
-        args.seed,
-    )?;
+                Ok(action)
+            },
+            &env_id,
+            &env,
+            args.episodes,
+            args.seed,
+        )?,
+        None => evaluate_model(
+            &policy,
+            &args.model,
+            &env,
+            args.episodes,
+            args.seed,
+            args.threads,
+        )?,
+    };
     if let Some(mut out) = trace {
         out.flush().context("writing the trace")?;
     }
@@ -112,6 +126,31 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         println!("  ({seconds:.1} s)");
     }
     Ok(())
+}
+
+/// `policy`'s held-out evaluation on `env` (its settings table), the episodes shared out over
+/// `threads` threads, each acting through its own copy of the model read from `path`.
+pub fn evaluate_model(
+    policy: &Policy,
+    path: &std::path::Path,
+    env: &toml::Table,
+    episodes: u32,
+    seed: u64,
+    threads: usize,
+) -> Result<EvalResult> {
+    let dir = policy.dir().unwrap_or(path).to_path_buf();
+    let make_actor = || -> fairgrasp_rl::error::Result<Actor<'static>> {
+        let mut copy = Policy::load(&dir)?;
+        Ok(Box::new(move |obs: &[f32]| copy.act(obs, true)))
+    };
+    Ok(evaluate_parallel(
+        &make_actor,
+        policy.env_id(),
+        env,
+        episodes,
+        seed,
+        threads,
+    )?)
 }
 
 /// The settings of the environment a model was trained on (rebuilt through the registry by

@@ -15,6 +15,7 @@ pub mod buffers;
 pub mod configs;
 pub mod distributions;
 pub mod error;
+pub mod evaluation;
 pub mod logger;
 pub mod model;
 pub mod nn;

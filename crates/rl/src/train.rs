@@ -9,6 +9,7 @@
 
 use crate::algorithm::{Algorithm, TensorMap};
 use crate::error::{Result, RlError};
+pub use crate::evaluation::{Actor, EvalResult, evaluate, evaluate_parallel, record_episode};
 use crate::logger::{CsvLogger, TensorBoardWriter};
 use crate::model::{
     ModelMeta, load_tensors, replace_dir, save_model, save_tensors, write_model_files,
@@ -194,112 +195,6 @@ impl TrainConfig {
         })?;
         Ok(())
     }
-}
-
-/// Result of an evaluation.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct EvalResult {
-    pub success_rate: f32,
-    pub mean_return: f32,
-    pub mean_length: f32,
-    pub episodes: u32,
-    /// The mean over episodes of each of the task's extras at the final step
-    /// (`fraction_sorted`, `lift`, …).
-    #[serde(default)]
-    pub final_extras: NamedValues,
-}
-
-/// Runs a deterministic policy on fresh environments `env_id` (built through the registry from
-/// `env_config`) with seeds `seed, seed+1, …`; `policy` maps one raw observation to one action
-/// (it normalises, if the model does).
-pub fn evaluate(
-    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
-    env_id: &str,
-    env_config: &toml::Table,
-    episodes: u32,
-    seed: u64,
-) -> Result<EvalResult> {
-    let mut env = RescaleAction::new(registry::make(env_id, env_config)?)?;
-    let (mut successes, mut total_return, mut total_length) = (0u32, 0.0f32, 0u64);
-    let mut extras_sum = NamedValues::new();
-    for e in 0..episodes as u64 {
-        let (mut obs, _) = env.reset(Some(seed + e))?;
-        loop {
-            let mut action = policy(&obs)?;
-            env.action_space().clip(&mut action);
-            let step = env.step(&action)?;
-            total_return += step.reward;
-            obs = step.obs;
-            if step.terminated || step.truncated {
-                successes += step.info.success as u32;
-                total_length += step.info.elapsed_steps as u64;
-                for (name, value) in step.info.extras.iter() {
-                    let sum = extras_sum.value(name) + value;
-                    extras_sum.set(name.to_string(), sum);
-                }
-                break;
-            }
-        }
-    }
-    let n = episodes.max(1) as f32;
-    let mut final_extras = NamedValues::new();
-    for (name, sum) in extras_sum.iter() {
-        final_extras.set(name.to_string(), sum / n);
-    }
-    Ok(EvalResult {
-        success_rate: successes as f32 / n,
-        mean_return: total_return / n,
-        mean_length: total_length as f32 / n,
-        episodes,
-        final_extras,
-    })
-}
-
-/// Plays one deterministic episode (seed `seed`) of `env_id` rendered by its `[render]`
-/// camera at `size`, and returns it as a GIF.
-pub fn record_episode(
-    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
-    env_id: &str,
-    env_config: &toml::Table,
-    seed: u64,
-    size: [u32; 2],
-) -> Result<Vec<u8>> {
-    let mut table = env_config.clone();
-    for item in [
-        "task.render_mode=\"rgb_array\"".to_string(),
-        format!("render.width={}", size[0]),
-        format!("render.height={}", size[1]),
-    ] {
-        fairgrasp_env::config::apply_override(&mut table, &item)?;
-    }
-    let mut env = RescaleAction::new(registry::make(env_id, &table)?)?;
-    let (mut obs, _) = env.reset(Some(seed))?;
-    let mut frames = Vec::new();
-    let mut frame = |env: &mut RescaleAction<Box<dyn fairgrasp_env::Env>>| -> Result<()> {
-        match env.render()? {
-            Some(fairgrasp_env::core::Frame::Rgb { data, .. }) => {
-                frames.push(data);
-                Ok(())
-            }
-            _ => Err(RlError::Other(format!(
-                "eval.record: {env_id} renders no RGB image (only the arm tasks do)"
-            ))),
-        }
-    };
-    loop {
-        frame(&mut env)?;
-        let mut action = policy(&obs)?;
-        env.action_space().clip(&mut action);
-        let step = env.step(&action)?;
-        obs = step.obs;
-        if step.terminated || step.truncated {
-            frame(&mut env)?;
-            break;
-        }
-    }
-    let fps = env.metadata().render_fps;
-    fairgrasp_env::render::video::encode_gif(&frames, size[0], size[1], fps)
-        .map_err(|e| RlError::Other(format!("eval.record: {e}")))
 }
 
 /// Progress reported to the caller (for a progress bar).
@@ -623,14 +518,20 @@ fn run<A: Algorithm>(
         let mut stop = false;
         if config.eval.freq > 0 && steps >= next_eval {
             next_eval += config.eval.freq;
-            // Acts exactly as the saved model will (`fairgrasp eval`, deployment).
-            let mut policy = Policy::from_parts(meta(&algo, &venv), &algo.weights()?)?;
-            let result = evaluate(
-                &mut |obs| policy.act(obs, true),
+            // Acts exactly as the saved model will (`fairgrasp eval`, deployment), one policy
+            // per thread: the episodes run on the env threads, idle during evaluation.
+            let (model_meta, weights) = (meta(&algo, &venv), algo.weights()?);
+            let make_actor = || -> Result<Actor<'static>> {
+                let mut policy = Policy::from_parts(model_meta.clone(), &weights)?;
+                Ok(Box::new(move |obs: &[f32]| policy.act(obs, true)))
+            };
+            let result = evaluate_parallel(
+                &make_actor,
                 &config.env_id,
                 &config.env,
                 config.eval.episodes,
                 EVAL_SEED_BASE,
+                config.threads,
             )?;
             let mut scalars: Vec<(String, f32)> = vec![
                 ("eval/success_rate".into(), result.success_rate),
@@ -644,8 +545,9 @@ fn run<A: Algorithm>(
                     .map(|(name, v)| (format!("eval/{name}"), v)),
             );
             if config.eval.record {
+                let mut actor = make_actor()?;
                 let gif = record_episode(
-                    &mut |obs| policy.act(obs, true),
+                    &mut actor,
                     &config.env_id,
                     &config.env,
                     EVAL_SEED_BASE,
