@@ -16,6 +16,7 @@ pub mod configs;
 pub mod distributions;
 pub mod error;
 pub mod evaluation;
+pub mod fast_tanh;
 pub mod logger;
 pub mod model;
 pub mod nn;

@@ -115,7 +115,7 @@ impl Mlp {
             x = layer.forward(&x)?;
             if i < last {
                 x = match self.activation {
-                    Activation::Tanh => x.tanh()?,
+                    Activation::Tanh => crate::fast_tanh::tanh_tensor(&x)?,
                     Activation::Relu => x.relu()?,
                 };
             }
