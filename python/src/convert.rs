@@ -158,6 +158,43 @@ pub fn bounds<'py>(py: Python<'py>, space: &fairgrasp_env::spaces::BoxSpace) -> 
     )
 }
 
+/// `(observation, info)`, what `reset` returns.
+pub fn obs_info<'py>(py: Python<'py>, obs: Vec<f32>, info: &Info) -> PyResult<Bound<'py, PyTuple>> {
+    PyTuple::new(
+        py,
+        [
+            PyArray1::from_vec(py, obs).into_any(),
+            info_dict(py, info)?.into_any(),
+        ],
+    )
+}
+
+/// Gymnasium's `metadata` dict: `render_modes` and `render_fps`.
+pub fn metadata_dict<'py>(
+    py: Python<'py>,
+    meta: &fairgrasp_env::core::Metadata,
+) -> PyResult<Bound<'py, PyDict>> {
+    let dict = PyDict::new(py);
+    let modes: Vec<&str> = meta
+        .render_modes
+        .iter()
+        .map(|m| render_mode_name(*m))
+        .collect();
+    dict.set_item("render_modes", modes)?;
+    dict.set_item("render_fps", meta.render_fps)?;
+    Ok(dict)
+}
+
+pub fn render_mode_name(mode: fairgrasp_env::core::RenderMode) -> &'static str {
+    use fairgrasp_env::core::RenderMode;
+    match mode {
+        RenderMode::Ansi => "ansi",
+        RenderMode::RgbArray => "rgb_array",
+        RenderMode::DepthArray => "depth_array",
+        RenderMode::SegmentationArray => "segmentation_array",
+    }
+}
+
 /// `Info` as Gymnasium's info dict: `is_success` (SB3's key), `elapsed_steps`, the task's extras
 /// by name, `reward_terms` and `events`.
 pub fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {

@@ -2,10 +2,10 @@
 //! dict whose keys are the env's TOML keys. The Python class `fairgrasp.FairgraspEnv` wraps it.
 
 use crate::convert::{
-    Bounds, bounds, f32_values, frame_object, info_dict, insert_path, table_from_dict,
+    Bounds, bounds, f32_values, frame_object, info_dict, insert_path, metadata_dict, obs_info,
+    render_mode_name, table_from_dict,
 };
 use crate::errors::{ConfigError, env_error, poisoned};
-use fairgrasp_env::core::RenderMode;
 use fairgrasp_env::spaces::BoxSpace;
 use fairgrasp_env::{Env as _, RescaleAction, registry};
 use numpy::PyArray1;
@@ -61,15 +61,6 @@ impl EnvRecipe {
         } else {
             env
         })
-    }
-}
-
-pub fn render_mode_name(mode: RenderMode) -> &'static str {
-    match mode {
-        RenderMode::Ansi => "ansi",
-        RenderMode::RgbArray => "rgb_array",
-        RenderMode::DepthArray => "depth_array",
-        RenderMode::SegmentationArray => "segmentation_array",
     }
 }
 
@@ -130,13 +121,7 @@ impl Env {
     #[pyo3(signature = (seed=None))]
     fn reset<'py>(&self, py: Python<'py>, seed: Option<u64>) -> PyResult<Bound<'py, PyTuple>> {
         let (obs, info) = self.with_env(py, |env| env.reset(seed))?;
-        PyTuple::new(
-            py,
-            [
-                PyArray1::from_vec(py, obs).into_any(),
-                info_dict(py, &info)?.into_any(),
-            ],
-        )
+        obs_info(py, obs, &info)
     }
 
     /// One control period: `(observation, reward, terminated, truncated, info)`. Actions
@@ -196,16 +181,7 @@ impl Env {
         let env = guard
             .as_ref()
             .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("the env is closed"))?;
-        let meta = env.metadata();
-        let dict = PyDict::new(py);
-        let modes: Vec<&str> = meta
-            .render_modes
-            .iter()
-            .map(|m| render_mode_name(*m))
-            .collect();
-        dict.set_item("render_modes", modes)?;
-        dict.set_item("render_fps", meta.render_fps)?;
-        Ok(dict)
+        metadata_dict(py, &env.metadata())
     }
 
     /// The render mode chosen at construction, if any.

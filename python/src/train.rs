@@ -5,7 +5,7 @@
 
 use crate::convert::{apply_settings, table_from_dict, to_toml};
 use crate::errors::{ConfigError, rl_error};
-use fairgrasp_rl::configs::{builtin_table, holds_a_run, next_free_run_dir, short_env_name};
+use fairgrasp_rl::configs::{builtin_table, default_run_dir, holds_a_run};
 use fairgrasp_rl::policies::Policy as NativePolicy;
 use fairgrasp_rl::train::{
     HELD_OUT_SEED_BASE, Progress, TrainConfig, evaluate as native_evaluate, resume_until,
@@ -15,7 +15,7 @@ use pyo3::exceptions::{PyOSError, PyRuntimeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 fn progress_dict<'py>(py: Python<'py>, p: &Progress) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
@@ -185,14 +185,7 @@ pub fn train(
             )));
         }
         Some(dir) => dir,
-        None => next_free_run_dir(
-            Path::new("runs"),
-            &format!(
-                "{}_{}",
-                config.algo.as_str(),
-                short_env_name(&config.env_id)
-            ),
-        ),
+        None => default_run_dir(config.algo.as_str(), &config.env_id),
     };
     drive(py, callback, |on_progress| {
         train_until(&config, &run_dir, on_progress)

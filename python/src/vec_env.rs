@@ -3,7 +3,9 @@
 //! `VectorEnv`). A step takes one `(n, act_dim)` float32 batch and returns one `(n, obs_dim)`
 //! batch: the observations are copied once, as a whole, from the vector env's buffer.
 
-use crate::convert::{Bounds, bounds, f32_values, frame_object, info_dict};
+use crate::convert::{
+    Bounds, bounds, f32_values, frame_object, info_dict, metadata_dict, obs_info, render_mode_name,
+};
 use crate::env::EnvRecipe;
 use crate::errors::{env_error, poisoned};
 use fairgrasp_env::spaces::BoxSpace;
@@ -167,13 +169,7 @@ impl VecEnv {
             let obs = envs.reset_env(index, seed)?.to_vec();
             Ok((obs, envs.reset_infos()[index].clone()))
         })?;
-        PyTuple::new(
-            py,
-            [
-                PyArray1::from_vec(py, obs).into_any(),
-                info_dict(py, &info)?.into_any(),
-            ],
-        )
+        obs_info(py, obs, &info)
     }
 
     /// Steps every env with its row of `actions` (`(num_envs, act_dim)`), resetting those whose
@@ -263,22 +259,14 @@ impl VecEnv {
     /// Gymnasium's `metadata` of one env.
     fn metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let meta = self.with_envs(py, |envs| Ok(env_at(envs, 0)?.metadata()))?;
-        let dict = PyDict::new(py);
-        let modes: Vec<&str> = meta
-            .render_modes
-            .iter()
-            .map(|m| crate::env::render_mode_name(*m))
-            .collect();
-        dict.set_item("render_modes", modes)?;
-        dict.set_item("render_fps", meta.render_fps)?;
-        Ok(dict)
+        metadata_dict(py, &meta)
     }
 
     /// The render mode chosen at construction, if any.
     #[getter]
     fn render_mode(&self, py: Python<'_>) -> PyResult<Option<&'static str>> {
         let mode = self.with_envs(py, |envs| Ok(env_at(envs, 0)?.render_mode()))?;
-        Ok(mode.map(crate::env::render_mode_name))
+        Ok(mode.map(render_mode_name))
     }
 
     /// Every setting of the envs, defaults filled in, as TOML text.

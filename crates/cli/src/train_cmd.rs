@@ -2,10 +2,10 @@
 //! saving, checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
 
 use anyhow::{Context, Result, bail};
-use fairgrasp_rl::configs::{builtin_table, holds_a_run, next_free_run_dir, short_env_name};
+use fairgrasp_rl::configs::{builtin_table, default_run_dir, holds_a_run};
 use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume, train};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -85,14 +85,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             }
             dir.clone()
         }
-        None => next_free_run_dir(
-            Path::new("runs"),
-            &format!(
-                "{}_{}",
-                config.algo.as_str(),
-                short_env_name(&config.env_id)
-            ),
-        ),
+        None => default_run_dir(config.algo.as_str(), &config.env_id),
     };
     println!(
         "training {} on {} for {} steps ({} envs, seed {}) into {}",

@@ -49,6 +49,15 @@ pub fn short_env_name(env_id: &str) -> String {
     out
 }
 
+/// `runs/<algo>_<env>` (e.g. `runs/ppo_grasp`), or the first free `runs/<algo>_<env>_<n>`: where
+/// a run goes when no directory is named.
+pub fn default_run_dir(algo: &str, env_id: &str) -> PathBuf {
+    next_free_run_dir(
+        Path::new("runs"),
+        &format!("{algo}_{}", short_env_name(env_id)),
+    )
+}
+
 /// Whether `dir` already holds a training run (its config or checkpoints).
 pub fn holds_a_run(dir: &Path) -> bool {
     dir.join("config.toml").exists() || dir.join("checkpoints").exists()
