@@ -225,30 +225,31 @@ fn event_name(event: EpisodeEvent) -> &'static str {
 /// A rendered frame as numpy (`H×W×3` uint8 RGB, `H×W` float32 depth, `H×W` uint16 segment
 /// ids) or text.
 pub fn frame_object<'py>(py: Python<'py>, frame: Frame) -> PyResult<Bound<'py, PyAny>> {
-    Ok(match frame {
-        Frame::Text(text) => PyString::new(py, &text).into_any(),
+    fn image<'py, T: numpy::Element>(
+        py: Python<'py>,
+        data: Vec<T>,
+        shape: &[usize],
+    ) -> PyResult<Bound<'py, PyAny>> {
+        Ok(PyArray1::from_vec(py, data).reshape(shape)?.into_any())
+    }
+    match frame {
+        Frame::Text(text) => Ok(PyString::new(py, &text).into_any()),
         Frame::Rgb {
             width,
             height,
             data,
-        } => PyArray1::from_vec(py, data)
-            .reshape([height as usize, width as usize, 3])?
-            .into_any(),
+        } => image(py, data, &[height as usize, width as usize, 3]),
         Frame::Depth {
             width,
             height,
             data,
-        } => PyArray1::from_vec(py, data)
-            .reshape([height as usize, width as usize])?
-            .into_any(),
+        } => image(py, data, &[height as usize, width as usize]),
         Frame::Segmentation {
             width,
             height,
             data,
-        } => PyArray1::from_vec(py, data)
-            .reshape([height as usize, width as usize])?
-            .into_any(),
-    })
+        } => image(py, data, &[height as usize, width as usize]),
+    }
 }
 
 /// `rows × cols` f32 values from a numpy array or a sequence. `shape` is what is expected, for

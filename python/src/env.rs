@@ -5,7 +5,7 @@ use crate::convert::{
     Bounds, bounds, f32_values, frame_object, info_dict, insert_path, metadata_dict, obs_info,
     render_mode_name, table_from_dict,
 };
-use crate::errors::{ConfigError, env_error, poisoned};
+use crate::errors::{ConfigError, env_error, poisoned, with_open};
 use fairgrasp_env::spaces::BoxSpace;
 use fairgrasp_env::{Env as _, RescaleAction, registry};
 use numpy::PyArray1;
@@ -81,13 +81,7 @@ impl Env {
         py: Python<'_>,
         f: impl FnOnce(&mut Box<dyn fairgrasp_env::Env>) -> fairgrasp_env::Result<T> + Send,
     ) -> PyResult<T> {
-        py.detach(|| {
-            let mut guard = self.inner.lock().map_err(|_| poisoned("env"))?;
-            let env = guard
-                .as_mut()
-                .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("the env is closed"))?;
-            f(env).map_err(env_error)
-        })
+        with_open(py, &self.inner, "env", f)
     }
 }
 

@@ -60,3 +60,20 @@ pub fn poisoned(what: &str) -> PyErr {
         "this {what} is unusable: an earlier call panicked inside it; create a new one"
     ))
 }
+
+/// Runs `f` on the env (or vector env, `what`) in `cell` with the GIL released; an error when it
+/// is closed or an earlier call panicked inside it.
+pub fn with_open<S: Send, T: Send>(
+    py: Python<'_>,
+    cell: &std::sync::Mutex<Option<S>>,
+    what: &str,
+    f: impl FnOnce(&mut S) -> fairgrasp_env::Result<T> + Send,
+) -> PyResult<T> {
+    py.detach(|| {
+        let mut guard = cell.lock().map_err(|_| poisoned(what))?;
+        let open = guard
+            .as_mut()
+            .ok_or_else(|| PyRuntimeError::new_err(format!("the {what} is closed")))?;
+        f(open).map_err(env_error)
+    })
+}

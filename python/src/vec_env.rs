@@ -7,11 +7,11 @@ use crate::convert::{
     Bounds, bounds, f32_values, frame_object, info_dict, metadata_dict, obs_info, render_mode_name,
 };
 use crate::env::EnvRecipe;
-use crate::errors::{env_error, poisoned};
+use crate::errors::{env_error, poisoned, with_open};
 use fairgrasp_env::spaces::BoxSpace;
 use fairgrasp_env::{EpisodeEnd, Info, VecEnv as NativeVecEnv, VectorEnv};
 use numpy::{PyArray1, PyArrayMethods};
-use pyo3::exceptions::{PyIndexError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use std::sync::Mutex;
@@ -56,13 +56,7 @@ impl VecEnv {
         py: Python<'_>,
         f: impl FnOnce(&mut Envs) -> fairgrasp_env::Result<T> + Send,
     ) -> PyResult<T> {
-        py.detach(|| {
-            let mut guard = self.inner.lock().map_err(|_| poisoned("vector env"))?;
-            let envs = guard
-                .as_mut()
-                .ok_or_else(|| PyRuntimeError::new_err("the vector env is closed"))?;
-            f(envs).map_err(env_error)
-        })
+        with_open(py, &self.inner, "vector env", f)
     }
 
     fn batch<'py>(&self, py: Python<'py>, obs: Vec<f32>) -> PyResult<Bound<'py, PyAny>> {
