@@ -1,7 +1,7 @@
 //! Vectorised environments: N copies of an [`Env`] stepped together, with automatic resets.
 //!
 //! [`VecEnv`] mirrors Stable-Baselines3's `VecEnv` (`DummyVecEnv` with one thread,
-//! `SubprocVecEnv`-like parallelism on a rayon thread pool otherwise) and Gymnasium's vector
+//! `SubprocVecEnv`-like parallelism on a pool of worker threads otherwise) and Gymnasium's vector
 //! environments in their `SAME_STEP` autoreset mode:
 //!
 //! - observations, rewards and flags come back as contiguous row-major batches
@@ -22,7 +22,9 @@ use crate::core::{Env, Info};
 use crate::error::{EnvError, Result};
 use crate::spaces::BoxSpace;
 use crate::wrappers::{EpisodeAccumulator, EpisodeStats};
-use rayon::prelude::*;
+
+mod pool;
+use pool::LockstepPool;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 /// What is kept when an environment's episode ends inside [`VectorEnv::step`].
@@ -290,6 +292,21 @@ impl<E: Env> Slot<E> {
     }
 }
 
+/// A vector's elements handed to the pool's parts, each part touching its own indices only.
+struct SharedRows<T>(*mut T);
+
+impl<T> SharedRows<T> {
+    /// # Safety
+    /// `i` must be in bounds, and no other thread may use element `i` meanwhile.
+    unsafe fn at(&self, i: usize) -> *mut T {
+        unsafe { self.0.add(i) }
+    }
+}
+
+// SAFETY: only used inside `VecEnv::run`, whose parts take disjoint indices; `T: Send` because
+// an element is used from another thread.
+unsafe impl<T: Send> Sync for SharedRows<T> {}
+
 /// N environments stepped in parallel, with automatic resets (see the [module](self)
 /// documentation).
 ///
@@ -314,7 +331,7 @@ impl<E: Env> Slot<E> {
 pub struct VecEnv<E: Env> {
     slots: Vec<Slot<E>>,
     /// `None`: step on the caller's thread.
-    pool: Option<rayon::ThreadPool>,
+    pool: Option<LockstepPool>,
     threads: usize,
     observation_space: BoxSpace,
     action_space: BoxSpace,
@@ -368,15 +385,9 @@ impl<E: Env> VecEnv<E> {
         };
         let threads = wanted.min(n).max(1);
         let pool = if threads > 1 {
-            Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .thread_name(|i| format!("fairgrasp-vecenv-{i}"))
-                    .build()
-                    .map_err(|e| {
-                        EnvError::Usage(format!("cannot start {threads} worker threads: {e}"))
-                    })?,
-            )
+            Some(LockstepPool::new(threads).map_err(|e| {
+                EnvError::Usage(format!("cannot start {threads} worker threads: {e}"))
+            })?)
         } else {
             None
         };
@@ -431,25 +442,36 @@ impl<E: Env> VecEnv<E> {
     }
 
     /// Runs `f` on every environment, on the pool when there is one; results in index order.
+    /// With a pool, part `p` of `t` threads takes environments `p, p + t, …`: always the same
+    /// ones, so each environment's state stays in one core's cache.
     fn run<T: Send>(&mut self, f: impl Fn(usize, &mut Slot<E>) -> T + Sync + Send) -> Vec<T> {
-        match &self.pool {
-            None => self
+        let Some(pool) = &self.pool else {
+            return self
                 .slots
                 .iter_mut()
                 .enumerate()
                 .map(|(i, s)| f(i, s))
-                .collect(),
-            Some(pool) => {
-                let slots = &mut self.slots;
-                pool.install(|| {
-                    slots
-                        .par_iter_mut()
-                        .enumerate()
-                        .map(|(i, s)| f(i, s))
-                        .collect()
-                })
+                .collect();
+        };
+        let n = self.slots.len();
+        let threads = pool.threads();
+        let mut results: Vec<Option<T>> = (0..n).map(|_| None).collect();
+        let slots = SharedRows(self.slots.as_mut_ptr());
+        let outs = SharedRows(results.as_mut_ptr());
+        pool.run(&|part| {
+            for i in (part..n).step_by(threads) {
+                // SAFETY: `i < n` indexes both vectors, which outlive `pool.run`; each index
+                // belongs to exactly one part, so no two threads touch the same element.
+                unsafe {
+                    let slot = &mut *slots.at(i);
+                    *outs.at(i) = Some(f(i, slot));
+                }
             }
-        }
+        });
+        results
+            .into_iter()
+            .map(|r| r.expect("every environment is stepped by exactly one part"))
+            .collect()
     }
 
     /// Turns per-environment failures into one error naming the first failed environment and
