@@ -9,6 +9,7 @@
 //! - [`assets`]: the bundled FR5 and gripper descriptions.
 
 pub mod assets;
+pub mod control;
 pub mod error;
 pub mod kinematics;
 pub mod math;

@@ -7,8 +7,10 @@ use fairgrasp_sim::SimError;
 use fairgrasp_sim::model::{
     Geometry, JointKind, LoadOptions, MeshCollision, PackagePaths, RobotModel, TriangleMesh,
 };
-use fairgrasp_sim::rapier3d::prelude::{ColliderSet, MultibodyJointSet, RigidBodySet, ShapeType};
-use fairgrasp_sim::robot::{Robot, RobotBuildOptions};
+use fairgrasp_sim::rapier3d::prelude::{
+    ColliderSet, ImpulseJointSet, MultibodyJointSet, RigidBodySet, ShapeType,
+};
+use fairgrasp_sim::robot::{JointSets, Robot, RobotBuildOptions};
 use std::path::{Path, PathBuf};
 
 const PACKAGE: &str = "mesh_robot_description";
@@ -294,6 +296,7 @@ fn build(model: RobotModel, mode: MeshCollision) -> (Robot, RigidBodySet, Collid
     let mut bodies = RigidBodySet::new();
     let mut colliders = ColliderSet::new();
     let mut multibody_joints = MultibodyJointSet::new();
+    let mut impulse_joints = ImpulseJointSet::new();
     let options = RobotBuildOptions {
         mesh_collision: mode,
         ..RobotBuildOptions::default()
@@ -303,7 +306,10 @@ fn build(model: RobotModel, mode: MeshCollision) -> (Robot, RigidBodySet, Collid
         &options,
         &mut bodies,
         &mut colliders,
-        &mut multibody_joints,
+        JointSets {
+            multibody_joints: &mut multibody_joints,
+            impulse_joints: &mut impulse_joints,
+        },
     )
     .unwrap_or_else(|e| panic!("building with {mode:?}: {e}"));
     (robot, bodies, colliders)

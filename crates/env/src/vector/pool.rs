@@ -100,10 +100,8 @@ impl LockstepPool {
         // it) and the new generation is not published yet. The pointer outlives its use
         // because this function does not return before `pending` is zero again.
         unsafe {
-            let erased = std::mem::transmute::<
-                *const (dyn Fn(usize) + Sync + 'a),
-                *const Task,
-            >(task);
+            let erased =
+                std::mem::transmute::<*const (dyn Fn(usize) + Sync + 'a), *const Task>(task);
             *shared.task.get() = Some(erased);
             *shared.caller.get() = Some(thread::current());
         }
@@ -118,7 +116,11 @@ impl LockstepPool {
         if let Err(payload) = own {
             resume_unwind(payload);
         }
-        let worker_panic = shared.panic.lock().unwrap_or_else(|p| p.into_inner()).take();
+        let worker_panic = shared
+            .panic
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
         if let Some(payload) = worker_panic {
             resume_unwind(payload);
         }
@@ -146,7 +148,7 @@ fn wait_until(done: impl Fn() -> bool) {
     while !done() {
         checks = checks.wrapping_add(1);
         // Reading the clock costs about as much as a few dozen spins; do it every 32 checks.
-        let elapsed = if checks % 32 == 0 {
+        let elapsed = if checks.is_multiple_of(32) {
             start.elapsed()
         } else {
             Duration::ZERO

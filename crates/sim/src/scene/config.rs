@@ -250,6 +250,26 @@ pub struct ArmConfig {
     pub armature: f32,
     pub self_collision: bool,
     pub mesh_collision: MeshCollision,
+    /// How the arm's joints are simulated: `"pd"`, torque-level PD motors (`kp`, `kd`,
+    /// `armature`), or `"kinematic"`, joints that follow their targets within the speed and
+    /// acceleration caps below as the real arm's position controller makes them (faster to
+    /// step; the gripper stays dynamic either way). Torque control needs `"pd"`. With
+    /// `"kinematic"` set `physics.pgs_iterations = 12`: the fingers then hang on impulse joints,
+    /// which need more sweeps than the multibody to hold a cube while the arm moves.
+    pub drive: ArmDrive,
+    /// Joint speed cap of the kinematic drive (deg/s); the FR5's joints reach 180 deg/s.
+    pub kinematic_speed_deg_s: f32,
+    /// Joint acceleration cap of the kinematic drive (deg/s²): the deployment's safety default.
+    pub kinematic_acc_deg_s2: f32,
+}
+
+/// See [`ArmConfig::drive`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ArmDrive {
+    #[default]
+    Pd,
+    Kinematic,
 }
 
 impl Default for ArmConfig {
@@ -275,6 +295,9 @@ impl Default for ArmConfig {
             armature: 0.1,
             self_collision: false,
             mesh_collision: MeshCollision::ConvexHull,
+            drive: ArmDrive::Pd,
+            kinematic_speed_deg_s: 180.0,
+            kinematic_acc_deg_s2: 720.0,
         }
     }
 }
@@ -483,6 +506,8 @@ impl SceneConfig {
         if !(self.arm.armature.is_finite() && self.arm.armature >= 0.0) {
             return Err(SimError::config("arm.armature", "must be non-negative"));
         }
+        positive("arm.kinematic_speed_deg_s", self.arm.kinematic_speed_deg_s)?;
+        positive("arm.kinematic_acc_deg_s2", self.arm.kinematic_acc_deg_s2)?;
         if self.arm.base_xyz.iter().any(|v| !v.is_finite()) || !self.arm.base_yaw.is_finite() {
             return Err(SimError::config("arm.base_xyz", "must be finite"));
         }

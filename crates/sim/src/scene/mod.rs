@@ -19,15 +19,15 @@ mod config;
 mod objects;
 
 pub use config::{
-    ArmConfig, BinConfig, GripperConfig, MAX_GRASP_WIDTH, MAX_OBJECTS, MountConfig, ObjectConfig,
-    ObjectShape, PhysicsConfig, PlacementConfig, SceneConfig, TableConfig,
+    ArmConfig, ArmDrive, BinConfig, GripperConfig, MAX_GRASP_WIDTH, MAX_OBJECTS, MountConfig,
+    ObjectConfig, ObjectShape, PhysicsConfig, PlacementConfig, SceneConfig, TableConfig,
 };
 
 use crate::error::{Result, SimError};
 use crate::kinematics::SerialChain;
 use crate::math::yaw_of;
 use crate::model::{Origin, RobotModel};
-use crate::robot::{PdGains, Robot, RobotBuildOptions, groups};
+use crate::robot::{JointDrive, JointSets, PdGains, Robot, RobotBuildOptions, groups};
 use crate::{assets, model::LoadOptions};
 use objects::{MeshCache, ObjectHandles};
 pub use objects::{PlacedShape, ShapeOwner};
@@ -49,6 +49,15 @@ struct WorldState {
     impulse_joints: ImpulseJointSet,
     multibody_joints: MultibodyJointSet,
     ccd: CCDSolver,
+}
+
+impl WorldState {
+    fn joint_sets(&mut self) -> JointSets<'_> {
+        JointSets {
+            multibody_joints: &mut self.multibody_joints,
+            impulse_joints: &mut self.impulse_joints,
+        }
+    }
 }
 
 /// A saved state of the scene, restored by [`Scene::restore`].
@@ -182,13 +191,28 @@ impl Scene {
             friction: 0.8,
             link_friction,
             armature: config.arm.armature,
+            drive: match config.arm.drive {
+                ArmDrive::Pd => JointDrive::Pd,
+                ArmDrive::Kinematic => JointDrive::Kinematic {
+                    speed: config.arm.kinematic_speed_deg_s.to_radians(),
+                    acc: config.arm.kinematic_acc_deg_s2.to_radians(),
+                    dt: config.physics.dt,
+                    dynamic_joints: vec![
+                        "left_finger_joint".to_string(),
+                        "right_finger_joint".to_string(),
+                    ],
+                },
+            },
         };
         let mut robot = Robot::build(
             arm_model,
             &build,
             &mut world.bodies,
             &mut world.colliders,
-            &mut world.multibody_joints,
+            JointSets {
+                multibody_joints: &mut world.multibody_joints,
+                impulse_joints: &mut world.impulse_joints,
+            },
         )?;
         let chain = SerialChain::new(&robot.model, TCP_LINK)?;
         let arm: Vec<usize> = chain
@@ -415,6 +439,7 @@ impl Scene {
         let w = &mut self.world;
         self.robot
             .apply_joint_torques(&mut w.bodies, &w.multibody_joints);
+        self.robot.drive_kinematic(&mut w.bodies, self.params.dt);
         self.pipeline.step(
             self.gravity,
             &self.params,
@@ -483,13 +508,17 @@ impl Scene {
 
     /// Arm joint angles (rad).
     pub fn arm_positions(&self) -> Vec<f32> {
-        let q = self.robot.joint_positions(&self.world.multibody_joints);
+        let q = self
+            .robot
+            .joint_positions(&self.world.bodies, &self.world.multibody_joints);
         self.arm.iter().map(|&j| q[j]).collect()
     }
 
     /// Arm joint velocities (rad/s).
     pub fn arm_velocities(&self) -> Vec<f32> {
-        let v = self.robot.joint_velocities(&self.world.multibody_joints);
+        let v = self
+            .robot
+            .joint_velocities(&self.world.bodies, &self.world.multibody_joints);
         self.arm.iter().map(|&j| v[j]).collect()
     }
 
@@ -519,13 +548,16 @@ impl Scene {
 
     /// Teleports the arm to `q` (rad) with zero velocity, holding it there.
     pub fn set_arm_positions(&mut self, q: &[f32]) -> Result<()> {
-        let finger = self.robot.joint_positions(&self.world.multibody_joints)[self.finger];
+        let finger = self
+            .robot
+            .joint_positions(&self.world.bodies, &self.world.multibody_joints)[self.finger];
         let full = self.full_vector(q, finger)?;
-        self.robot.set_joint_positions(
-            &full,
-            &mut self.world.bodies,
-            &mut self.world.multibody_joints,
-        )
+        let w = &mut self.world;
+        let sets = JointSets {
+            multibody_joints: &mut w.multibody_joints,
+            impulse_joints: &mut w.impulse_joints,
+        };
+        self.robot.set_joint_positions(&full, &mut w.bodies, sets)
     }
 
     /// Position control of the arm: PD targets (rad), clamped to the joint limits.
@@ -533,7 +565,7 @@ impl Scene {
         let finger = self.robot.position_targets()[self.finger];
         let full = self.full_vector(q, finger)?;
         self.robot
-            .set_position_targets(&full, &mut self.world.multibody_joints)
+            .set_position_targets(&full, self.world.joint_sets())
     }
 
     /// Torque control of the arm (N·m, clamped to effort limits); the gripper stays position
@@ -550,8 +582,7 @@ impl Scene {
         for (&j, &t) in self.arm.iter().zip(tau) {
             full[j] = t;
         }
-        self.robot
-            .set_torques(&full, &mut self.world.multibody_joints)
+        self.robot.set_torques(&full, self.world.joint_sets())
     }
 
     // ── Gripper ────────────────────────────────────────────────────────────
@@ -563,7 +594,9 @@ impl Scene {
 
     /// Distance between the finger pads (m).
     pub fn gripper_opening(&self) -> f32 {
-        2.0 * self.robot.joint_positions(&self.world.multibody_joints)[self.finger]
+        2.0 * self
+            .robot
+            .joint_positions(&self.world.bodies, &self.world.multibody_joints)[self.finger]
     }
 
     /// Commands the fingers to an opening (m); they squeeze with at most the force limit.
@@ -573,7 +606,7 @@ impl Scene {
         }
         let q = (opening / 2.0).clamp(0.0, self.max_opening() / 2.0);
         self.robot
-            .set_position_target(self.finger, q, &mut self.world.multibody_joints)
+            .set_position_target(self.finger, q, self.world.joint_sets())
     }
 
     /// Opens fully (`true`) or closes (`false`).
@@ -587,7 +620,9 @@ impl Scene {
     }
 
     fn set_gripper_opening_now(&mut self, opening: f32) -> Result<()> {
-        let mut q = self.robot.joint_positions(&self.world.multibody_joints);
+        let mut q = self
+            .robot
+            .joint_positions(&self.world.bodies, &self.world.multibody_joints);
         let half = (opening / 2.0).clamp(0.0, self.max_opening() / 2.0);
         q[self.finger] = half;
         for (j, joint) in self.robot.joints.iter().enumerate() {
@@ -595,8 +630,12 @@ impl Scene {
                 q[j] = m * q[leader] + o;
             }
         }
-        self.robot
-            .set_joint_positions(&q, &mut self.world.bodies, &mut self.world.multibody_joints)
+        let w = &mut self.world;
+        let sets = JointSets {
+            multibody_joints: &mut w.multibody_joints,
+            impulse_joints: &mut w.impulse_joints,
+        };
+        self.robot.set_joint_positions(&q, &mut w.bodies, sets)
     }
 
     // ── Poses ──────────────────────────────────────────────────────────────
@@ -658,7 +697,7 @@ impl Scene {
         // Gains take effect through the motors at the next target update.
         let targets = self.robot.position_targets().to_vec();
         self.robot
-            .set_position_targets(&targets, &mut self.world.multibody_joints)
+            .set_position_targets(&targets, self.world.joint_sets())
     }
 
     // ── Kinematics ─────────────────────────────────────────────────────────

@@ -4,12 +4,18 @@
 //! up), so `tool0`, a gripper base and a TCP frame cost nothing at run time. Every movable joint
 //! becomes a multibody joint with a force-based PD motor capped at the URDF effort limit; URDF
 //! `<mimic>` becomes a rapier DOF coupling (this is how the two gripper fingers move as one).
+//!
+//! With [`JointDrive::Kinematic`] the arm's links are kinematic bodies that follow their joint
+//! targets through a ramp instead (see [`kinematic`]), and only the gripper stays dynamic.
+
+mod kinematic;
 
 use crate::error::{Result, SimError};
 use crate::kinematics::origin_to_isometry;
 use crate::math::{iso_to_pose, pose_to_iso};
 use crate::model::{Geometry, JointKind, MeshCollision, RobotModel, Shape};
-use rapier3d::na::Isometry3;
+use kinematic::KinematicArm;
+use rapier3d::na::{Isometry3, Unit, Vector3};
 use rapier3d::prelude::*;
 use std::collections::HashMap;
 
@@ -37,6 +43,31 @@ pub struct RobotBuildOptions {
     /// Rotor inertia added to every joint (kg·m² or kg): real geared joints have a large one,
     /// and it keeps stiff PD motors on light links stable.
     pub armature: f32,
+    pub drive: JointDrive,
+}
+
+/// The joint sets of the world a robot is built into.
+pub struct JointSets<'a> {
+    pub multibody_joints: &'a mut MultibodyJointSet,
+    pub impulse_joints: &'a mut ImpulseJointSet,
+}
+
+/// How the joints are simulated.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum JointDrive {
+    /// Every movable joint a multibody joint with a force-based PD motor: a torque-level arm.
+    #[default]
+    Pd,
+    /// Joints follow their targets through a [`crate::control::JointRamp`] with these caps
+    /// (rad/s, rad/s²; m/s and m/s² for prismatic joints) every physics step of `dt` seconds,
+    /// their links kinematic bodies. The joints in `dynamic_joints` (the gripper's) stay
+    /// dynamic: impulse joints with PD motors; no kinematic joint may follow one of them.
+    Kinematic {
+        speed: f32,
+        acc: f32,
+        dt: f32,
+        dynamic_joints: Vec<String>,
+    },
 }
 
 impl Default for RobotBuildOptions {
@@ -48,6 +79,7 @@ impl Default for RobotBuildOptions {
             friction: 0.8,
             link_friction: HashMap::new(),
             armature: 0.05,
+            drive: JointDrive::Pd,
         }
     }
 }
@@ -77,6 +109,19 @@ pub struct RobotJoint {
     pub mimic: Option<(usize, f32, f32)>,
 }
 
+/// Where a movable joint sits between the robot's bodies.
+#[derive(Clone, Debug)]
+pub(crate) struct JointGeometry {
+    /// Indices into [`Robot::bodies`].
+    pub(crate) parent_body: usize,
+    pub(crate) child_body: usize,
+    /// The joint's frame at zero position, in the parent body's frame.
+    pub(crate) origin: Isometry3<f64>,
+    /// Unit axis in that frame.
+    pub(crate) axis: Unit<Vector3<f64>>,
+    pub(crate) kind: JointKind,
+}
+
 impl RobotJoint {
     fn axis(&self) -> JointAxis {
         match self.kind {
@@ -104,7 +149,12 @@ enum DriveMode {
 #[derive(Clone, Debug)]
 pub struct Robot {
     pub model: RobotModel,
-    multibody: MultibodyIndex,
+    /// The multibody of the PD drive; `None` under the kinematic drive.
+    multibody: Option<MultibodyIndex>,
+    /// The kinematic drive's state; `None` under the PD drive.
+    kinematic: Option<KinematicArm>,
+    /// Per movable joint, in [`Self::joints`] order.
+    geometry: Vec<JointGeometry>,
     /// Rigid bodies after merging fixed links; `bodies[0]` is the root.
     pub bodies: Vec<RigidBodyHandle>,
     /// For each model link: its body (index into `bodies`) and pose in that body.
@@ -193,8 +243,12 @@ impl Robot {
         options: &RobotBuildOptions,
         bodies: &mut RigidBodySet,
         colliders: &mut ColliderSet,
-        multibody_joints: &mut MultibodyJointSet,
+        sets: JointSets<'_>,
     ) -> Result<Self> {
+        let JointSets {
+            multibody_joints,
+            impulse_joints,
+        } = sets;
         if !model.joints.iter().any(|j| j.kind.is_movable()) {
             return Err(SimError::urdf(
                 &model.source_name,
@@ -231,6 +285,42 @@ impl Robot {
                 world_of_link[joint.parent] * origin_to_isometry(&joint.origin);
         }
 
+        // Under the kinematic drive, which bodies are kinematic: those moved by a joint not
+        // listed as dynamic, as long as no dynamic joint lies between them and the root.
+        let mut kinematic_body = vec![false; body_links.len()];
+        if let JointDrive::Kinematic { dynamic_joints, .. } = &options.drive {
+            for name in dynamic_joints {
+                if !model
+                    .joints
+                    .iter()
+                    .any(|j| &j.name == name && j.kind.is_movable())
+                {
+                    return Err(SimError::urdf(
+                        &model.source_name,
+                        format!("joint '{name}'"),
+                        "is listed as a dynamic joint of the kinematic drive but is not a \
+                         movable joint of this robot",
+                    ));
+                }
+            }
+            let body_of_link = |l: usize| link_frames[l].0;
+            for joint in model.joints.iter().filter(|j| j.kind.is_movable()) {
+                let parent = body_of_link(joint.parent);
+                let child = body_of_link(joint.child);
+                let dynamic = dynamic_joints.contains(&joint.name);
+                if !dynamic {
+                    if parent != 0 && !kinematic_body[parent] {
+                        return Err(SimError::urdf(
+                            &model.source_name,
+                            format!("joint '{}'", joint.name),
+                            "follows a dynamic joint, so the kinematic drive cannot move it",
+                        ));
+                    }
+                    kinematic_body[child] = true;
+                }
+            }
+        }
+
         // 3. Bodies with summed mass properties and colliders.
         let mut handles = Vec::with_capacity(body_links.len());
         for (b, &link) in body_links.iter().enumerate() {
@@ -255,7 +345,21 @@ impl Robot {
             }
             let builder = if b == 0 {
                 RigidBodyBuilder::fixed()
+            } else if kinematic_body[b] {
+                RigidBodyBuilder::kinematic_position_based()
             } else {
+                if matches!(options.drive, JointDrive::Kinematic { .. }) && mass.mass() > 0.0 {
+                    // An impulse joint has no rotor inertia (armature), which the multibody adds
+                    // along each joint axis; the body carries it instead (the finger 0.05 →
+                    // 0.15 kg). Without it the fingers let a lifted cube slip out: 0 of 50
+                    // scripted picks held; with it 50 of 50.
+                    let scale = (mass.mass() + options.armature) / mass.mass();
+                    mass = MassProperties::with_inertia_matrix(
+                        mass.local_com,
+                        mass.mass() * scale,
+                        mass.reconstruct_inertia_matrix() * scale,
+                    );
+                }
                 RigidBodyBuilder::dynamic()
                     .additional_mass_properties(mass)
                     // A sleeping link ignores new motor targets.
@@ -311,8 +415,11 @@ impl Robot {
             }
         }
 
-        // 4. Multibody joints for movable joints.
+        // 4. Joints for movable joints: multibody joints under the PD drive; under the kinematic
+        //    drive none for kinematic joints and impulse joints for dynamic ones.
         let mut joints = Vec::new();
+        let mut geometry = Vec::new();
+        let mut impulse = Vec::new();
         for (model_index, joint) in model.joints.iter().enumerate() {
             if joint.kind == JointKind::Fixed {
                 continue;
@@ -353,36 +460,50 @@ impl Robot {
             if joint.kind != JointKind::Continuous {
                 builder = builder.limits(rj.axis(), [rj.limits.0, rj.limits.1]);
             }
-            multibody_joints
-                .insert(
+            let axis = Vector3::new(joint.axis[0], joint.axis[1], joint.axis[2]);
+            geometry.push(JointGeometry {
+                parent_body,
+                child_body,
+                origin: parent_offset * origin_to_isometry(&joint.origin),
+                axis: Unit::try_new(axis, 1e-9).ok_or_else(|| {
+                    SimError::urdf(
+                        &model.source_name,
+                        format!("joint '{}'", joint.name),
+                        "has a zero axis",
+                    )
+                })?,
+                kind: joint.kind,
+            });
+            let refused = || {
+                SimError::urdf(
+                    &model.source_name,
+                    format!("joint '{}'", joint.name),
+                    "rapier refused the joint (would close a loop)",
+                )
+            };
+            match &options.drive {
+                JointDrive::Pd => {
+                    multibody_joints
+                        .insert(
+                            handles[parent_body],
+                            handles[child_body],
+                            builder.build(),
+                            true,
+                        )
+                        .ok_or_else(refused)?;
+                    impulse.push(None);
+                }
+                JointDrive::Kinematic { .. } if kinematic_body[child_body] => impulse.push(None),
+                JointDrive::Kinematic { .. } => impulse.push(Some(impulse_joints.insert(
                     handles[parent_body],
                     handles[child_body],
                     builder.build(),
                     true,
-                )
-                .ok_or_else(|| {
-                    SimError::urdf(
-                        &model.source_name,
-                        format!("joint '{}'", joint.name),
-                        "rapier refused the joint (would close a loop)",
-                    )
-                })?;
+                ))),
+            }
             joints.push(rj);
         }
-        let multibody = multibody_joints
-            .rigid_body_link(handles[0])
-            .ok_or_else(|| SimError::Command("robot root is not in a multibody".into()))?
-            .multibody;
-        for joint in joints.iter_mut() {
-            let child_body = handles[link_frames[model.joints[joint.model_index].child].0];
-            joint.link_id = multibody_joints
-                .rigid_body_link(child_body)
-                .map(|l| l.id)
-                .ok_or_else(|| {
-                    SimError::Command(format!("joint '{}' lost its multibody link", joint.name))
-                })?;
-        }
-        // Mimic joints become DOF couplings.
+        // Mimic joints: DOF couplings under the PD drive, mirrored motor targets otherwise.
         let names: Vec<String> = joints.iter().map(|j| j.name.clone()).collect();
         for joint in joints.iter_mut() {
             let model_joint = &model.joints[joint.model_index];
@@ -398,34 +519,62 @@ impl Robot {
                 joint.mimic = Some((leader, m.multiplier as f32, m.offset as f32));
             }
         }
-        let mb = multibody_joints
-            .get_multibody_mut(multibody)
-            .ok_or_else(|| SimError::Command("robot multibody missing".into()))?;
-        mb.set_self_contacts_enabled(options.self_collision);
-        for joint in &joints {
-            let link = mb.link(joint.link_id).expect("link id from rapier");
-            let dof = link.assembly_id();
-            mb.armature_mut()[dof] = options.armature;
-            mb.damping_mut()[dof] = model.joints[joint.model_index].damping as f32;
-            if let Some((leader, multiplier, offset)) = joint.mimic {
-                let leader = &joints[leader];
-                mb.add_dof_coupling(MultibodyDofCoupling {
-                    link1: leader.link_id,
-                    dof1: 0,
-                    axis1: leader.coord_index(),
-                    link2: joint.link_id,
-                    dof2: 0,
-                    axis2: joint.coord_index(),
-                    coeff: multiplier,
-                    offset,
-                });
+        let (multibody, kinematic) = match &options.drive {
+            JointDrive::Pd => {
+                let multibody = multibody_joints
+                    .rigid_body_link(handles[0])
+                    .ok_or_else(|| SimError::Command("robot root is not in a multibody".into()))?
+                    .multibody;
+                for joint in joints.iter_mut() {
+                    let child_body = handles[link_frames[model.joints[joint.model_index].child].0];
+                    joint.link_id = multibody_joints
+                        .rigid_body_link(child_body)
+                        .map(|l| l.id)
+                        .ok_or_else(|| {
+                            SimError::Command(format!(
+                                "joint '{}' lost its multibody link",
+                                joint.name
+                            ))
+                        })?;
+                }
+                let mb = multibody_joints
+                    .get_multibody_mut(multibody)
+                    .ok_or_else(|| SimError::Command("robot multibody missing".into()))?;
+                mb.set_self_contacts_enabled(options.self_collision);
+                for joint in &joints {
+                    let link = mb.link(joint.link_id).expect("link id from rapier");
+                    let dof = link.assembly_id();
+                    mb.armature_mut()[dof] = options.armature;
+                    mb.damping_mut()[dof] = model.joints[joint.model_index].damping as f32;
+                    if let Some((leader, multiplier, offset)) = joint.mimic {
+                        let leader = &joints[leader];
+                        mb.add_dof_coupling(MultibodyDofCoupling {
+                            link1: leader.link_id,
+                            dof1: 0,
+                            axis1: leader.coord_index(),
+                            link2: joint.link_id,
+                            dof2: 0,
+                            axis2: joint.coord_index(),
+                            coeff: multiplier,
+                            offset,
+                        });
+                    }
+                }
+                (Some(multibody), None)
             }
-        }
+            JointDrive::Kinematic { speed, acc, dt, .. } => {
+                let limits: Vec<(f32, f32)> = joints.iter().map(|j| j.limits).collect();
+                let arm = KinematicArm::new(impulse, &limits, *speed, *acc, *dt);
+                (None, Some(arm))
+            }
+        };
 
         let n = joints.len();
         let mut robot = Robot {
             model,
             multibody,
+            kinematic,
+            geometry,
             bodies: handles,
             link_frames: link_frames
                 .into_iter()
@@ -444,7 +593,10 @@ impl Robot {
             kp: 2_000.0,
             kd: 100.0,
         });
-        robot.apply_motors(multibody_joints);
+        robot.apply_motors(JointSets {
+            multibody_joints,
+            impulse_joints,
+        });
         Ok(robot)
     }
 
@@ -486,31 +638,58 @@ impl Robot {
         self.joints.iter().position(|j| j.name == name)
     }
 
-    fn multibody<'a>(&self, set: &'a MultibodyJointSet) -> &'a Multibody {
-        set.get_multibody(self.multibody)
-            .expect("the robot's multibody lives as long as the world")
+    fn multibody<'a>(&self, set: &'a MultibodyJointSet) -> Option<&'a Multibody> {
+        self.multibody.map(|m| {
+            set.get_multibody(m)
+                .expect("the robot's multibody lives as long as the world")
+        })
     }
 
-    fn multibody_mut<'a>(&self, set: &'a mut MultibodyJointSet) -> &'a mut Multibody {
-        set.get_multibody_mut(self.multibody)
-            .expect("the robot's multibody lives as long as the world")
+    fn multibody_mut<'a>(&self, set: &'a mut MultibodyJointSet) -> Option<&'a mut Multibody> {
+        self.multibody.map(|m| {
+            set.get_multibody_mut(m)
+                .expect("the robot's multibody lives as long as the world")
+        })
+    }
+
+    /// Whether the joints follow their targets kinematically ([`JointDrive::Kinematic`]).
+    pub fn is_kinematic(&self) -> bool {
+        self.kinematic.is_some()
     }
 
     /// Positions of all movable joints (rad or m), in [`Self::joints`] order.
-    pub fn joint_positions(&self, set: &MultibodyJointSet) -> Vec<f32> {
-        let mb = self.multibody(set);
-        self.joints
-            .iter()
-            .map(|j| mb.link(j.link_id).expect("link").joint.coords()[j.coord_index()])
+    pub fn joint_positions(&self, bodies: &RigidBodySet, set: &MultibodyJointSet) -> Vec<f32> {
+        if let Some(mb) = self.multibody(set) {
+            return self
+                .joints
+                .iter()
+                .map(|j| mb.link(j.link_id).expect("link").joint.coords()[j.coord_index()])
+                .collect();
+        }
+        let arm = self.kinematic.as_ref().expect("one drive or the other");
+        (0..self.joints.len())
+            .map(|j| match arm.impulse[j] {
+                None => arm.q[j],
+                Some(_) => kinematic::measured_position(&self.geometry[j], bodies, &self.bodies),
+            })
             .collect()
     }
 
     /// Velocities of all movable joints (rad/s or m/s).
-    pub fn joint_velocities(&self, set: &MultibodyJointSet) -> Vec<f32> {
-        let mb = self.multibody(set);
-        self.joints
-            .iter()
-            .map(|j| mb.joint_velocity(mb.link(j.link_id).expect("link"))[0])
+    pub fn joint_velocities(&self, bodies: &RigidBodySet, set: &MultibodyJointSet) -> Vec<f32> {
+        if let Some(mb) = self.multibody(set) {
+            return self
+                .joints
+                .iter()
+                .map(|j| mb.joint_velocity(mb.link(j.link_id).expect("link"))[0])
+                .collect();
+        }
+        let arm = self.kinematic.as_ref().expect("one drive or the other");
+        (0..self.joints.len())
+            .map(|j| match arm.impulse[j] {
+                None => arm.qd[j],
+                Some(_) => kinematic::measured_velocity(&self.geometry[j], bodies, &self.bodies),
+            })
             .collect()
     }
 
@@ -520,20 +699,42 @@ impl Robot {
         &mut self,
         q: &[f32],
         bodies: &mut RigidBodySet,
-        set: &mut MultibodyJointSet,
+        sets: JointSets<'_>,
     ) -> Result<()> {
         self.check_len(q, "joint positions")?;
-        let current = self.joint_positions(set);
-        let mb = self.multibody_mut(set);
-        let mut disp = vec![0.0; mb.ndofs()];
-        for (j, joint) in self.joints.iter().enumerate() {
-            let dof = mb.link(joint.link_id).expect("link").assembly_id();
-            disp[dof] = q[j] - current[j];
+        if let Some(mb) = self.multibody_mut(sets.multibody_joints) {
+            let current: Vec<f32> = self
+                .joints
+                .iter()
+                .map(|j| mb.link(j.link_id).expect("link").joint.coords()[j.coord_index()])
+                .collect();
+            let mut disp = vec![0.0; mb.ndofs()];
+            for (j, joint) in self.joints.iter().enumerate() {
+                let dof = mb.link(joint.link_id).expect("link").assembly_id();
+                disp[dof] = q[j] - current[j];
+            }
+            mb.apply_displacements(&disp);
+            mb.generalized_velocity_mut().fill(0.0);
+            mb.forward_kinematics(bodies, true);
+            mb.update_rigid_bodies(bodies, true);
         }
-        mb.apply_displacements(&disp);
-        mb.generalized_velocity_mut().fill(0.0);
-        mb.forward_kinematics(bodies, true);
-        mb.update_rigid_bodies(bodies, true);
+        if let Some(arm) = self.kinematic.as_mut() {
+            for &j in &arm.ramp_joints {
+                arm.q[j] = q[j];
+                arm.qd[j] = 0.0;
+            }
+            let start: Vec<f64> = arm.ramp_joints.iter().map(|&j| q[j] as f64).collect();
+            arm.ramp.start(&start);
+            let root = pose_to_iso(bodies[self.bodies[0]].position());
+            let poses = kinematic::body_poses(root, &self.geometry, self.bodies.len(), q);
+            for (b, pose) in poses.iter().enumerate().skip(1) {
+                let body = &mut bodies[self.bodies[b]];
+                body.set_position(iso_to_pose(pose), true);
+                if body.is_kinematic() {
+                    body.set_next_kinematic_position(iso_to_pose(pose));
+                }
+            }
+        }
         for &b in &self.bodies {
             if let Some(rb) = bodies.get_mut(b) {
                 rb.set_linvel(Vector::ZERO, true);
@@ -541,7 +742,7 @@ impl Robot {
             }
         }
         self.targets.copy_from_slice(q);
-        self.apply_motors(set);
+        self.apply_motors(sets);
         Ok(())
     }
 
@@ -617,9 +818,11 @@ impl Robot {
             .get(joint)
             .ok_or_else(|| SimError::Command(format!("no joint {joint}")))?
             .link_id;
-        let mb = self.multibody_mut(set);
-        let dof = mb.link(link_id).expect("link").assembly_id();
-        mb.damping_mut()[dof] = damping;
+        // Kinematic joints follow their targets whatever the damping.
+        if let Some(mb) = self.multibody_mut(set) {
+            let dof = mb.link(link_id).expect("link").assembly_id();
+            mb.damping_mut()[dof] = damping;
+        }
         Ok(())
     }
 
@@ -635,32 +838,34 @@ impl Robot {
 
     /// Position control: targets clamped to the joint limits, tracked by the PD motors.
     /// Targets of mimic joints are ignored (the coupling drives them).
-    pub fn set_position_targets(&mut self, q: &[f32], set: &mut MultibodyJointSet) -> Result<()> {
+    pub fn set_position_targets(&mut self, q: &[f32], sets: JointSets<'_>) -> Result<()> {
         self.check_len(q, "position targets")?;
         for (t, (v, j)) in self.targets.iter_mut().zip(q.iter().zip(&self.joints)) {
             *t = v.clamp(j.limits.0, j.limits.1);
         }
         self.mode = DriveMode::Position;
-        self.apply_motors(set);
+        self.apply_motors(sets);
         Ok(())
     }
 
     /// Position target of one joint.
-    pub fn set_position_target(
-        &mut self,
-        joint: usize,
-        q: f32,
-        set: &mut MultibodyJointSet,
-    ) -> Result<()> {
+    pub fn set_position_target(&mut self, joint: usize, q: f32, sets: JointSets<'_>) -> Result<()> {
         let mut targets = self.targets.clone();
         *targets
             .get_mut(joint)
             .ok_or_else(|| SimError::Command(format!("no joint {joint}")))? = q;
-        self.set_position_targets(&targets, set)
+        self.set_position_targets(&targets, sets)
     }
 
     /// Torque control: motors off, `tau` (clamped to effort limits) applied every physics step.
-    pub fn set_torques(&mut self, tau: &[f32], set: &mut MultibodyJointSet) -> Result<()> {
+    pub fn set_torques(&mut self, tau: &[f32], sets: JointSets<'_>) -> Result<()> {
+        if self.is_kinematic() {
+            return Err(SimError::Command(
+                "torque control needs the PD drive (arm.drive = \"pd\"); kinematic joints \
+                 follow position targets only"
+                    .into(),
+            ));
+        }
         self.check_len(tau, "torques")?;
         let clamped = tau
             .iter()
@@ -668,31 +873,55 @@ impl Robot {
             .map(|(t, j)| t.clamp(-j.effort, j.effort))
             .collect();
         self.mode = DriveMode::Torque(clamped);
-        self.apply_motors(set);
+        self.apply_motors(sets);
         Ok(())
     }
 
-    fn apply_motors(&self, set: &mut MultibodyJointSet) {
+    fn apply_motors(&self, sets: JointSets<'_>) {
         let torque_mode = matches!(self.mode, DriveMode::Torque(_));
-        let mb = self.multibody_mut(set);
-        for (j, joint) in self.joints.iter().enumerate() {
-            let link = mb.link_mut(joint.link_id).expect("link");
-            let (kp, kd) = if torque_mode || joint.mimic.is_some() {
-                (0.0, 0.0)
-            } else {
-                (self.gains[j].kp, self.gains[j].kd)
-            };
-            link.joint
-                .data
-                .set_motor(joint.axis(), self.targets[j], 0.0, kp, kd);
-            link.joint.data.set_motor_max_force(
-                joint.axis(),
-                if kp == 0.0 && kd == 0.0 {
-                    0.0
+        if let Some(mb) = self.multibody_mut(sets.multibody_joints) {
+            for (j, joint) in self.joints.iter().enumerate() {
+                let link = mb.link_mut(joint.link_id).expect("link");
+                let (kp, kd) = if torque_mode || joint.mimic.is_some() {
+                    (0.0, 0.0)
                 } else {
-                    joint.effort
-                },
-            );
+                    (self.gains[j].kp, self.gains[j].kd)
+                };
+                link.joint
+                    .data
+                    .set_motor(joint.axis(), self.targets[j], 0.0, kp, kd);
+                link.joint.data.set_motor_max_force(
+                    joint.axis(),
+                    if kp == 0.0 && kd == 0.0 {
+                        0.0
+                    } else {
+                        joint.effort
+                    },
+                );
+            }
+        }
+        let Some(arm) = &self.kinematic else {
+            return;
+        };
+        // Dynamic joints: PD motors; a mimic joint gets its leader's target (mapped), gains and
+        // force, since no coupling ties the two.
+        for (j, joint) in self.joints.iter().enumerate() {
+            let Some(handle) = arm.impulse[j] else {
+                continue;
+            };
+            let (target, drive) = match joint.mimic {
+                Some((leader, multiplier, offset)) => {
+                    (multiplier * self.targets[leader] + offset, leader)
+                }
+                None => (self.targets[j], j),
+            };
+            if let Some(impulse) = sets.impulse_joints.get_mut(handle, true) {
+                let PdGains { kp, kd } = self.gains[drive];
+                impulse.data.set_motor(joint.axis(), target, 0.0, kp, kd);
+                impulse
+                    .data
+                    .set_motor_max_force(joint.axis(), self.joints[drive].effort);
+            }
         }
     }
 
@@ -702,7 +931,9 @@ impl Robot {
         let DriveMode::Torque(tau) = &self.mode else {
             return;
         };
-        let mb = self.multibody(set);
+        let Some(mb) = self.multibody(set) else {
+            return;
+        };
         for (joint, &t) in self.joints.iter().zip(tau) {
             if t == 0.0 {
                 continue;
