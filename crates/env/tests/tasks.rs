@@ -124,3 +124,28 @@ fn an_object_dropped_into_the_wrong_bin_is_not_sorted() {
         "the drop missed the bin"
     );
 }
+
+#[test]
+fn pick_and_place_works_on_the_kinematic_arm_drive() {
+    let mut config = PickPlaceConfig::default();
+    config.control.action_mode = ActionMode::Cartesian;
+    config.task.max_episode_steps = 150;
+    config.scene.arm.drive = fairgrasp_env::sim::scene::ArmDrive::Kinematic;
+    config.scene.physics.pgs_iterations = 12;
+    let mut env = PickPlaceEnv::new(config).unwrap();
+    let episodes = 10;
+    let mut successes = 0;
+    for seed in 0..episodes {
+        env.reset(Some(seed)).unwrap();
+        let goal = env.scene().base_pose() * Point3::from(env.task().goal());
+        let mut policy = ScriptedGraspPolicy::with_goal(&env, Some(goal.coords));
+        loop {
+            let step = env.step(&policy.act(&env)).unwrap();
+            if step.terminated || step.truncated {
+                successes += usize::from(step.info.success);
+                break;
+            }
+        }
+    }
+    assert!(successes >= 9, "kinematic drive: {successes}/{episodes}");
+}
