@@ -7,6 +7,7 @@ use crate::safety::SafetyConfig;
 use fairgrasp_env::arm::ServoConfig;
 use fairgrasp_env::arm::{ActionMode, ArmState, Command};
 use fairgrasp_env::sim::kinematics::SerialChain;
+use fairgrasp_env::sim::scene::ArmDrive;
 use fairgrasp_env::wrappers::RescaleAction;
 use fairgrasp_env::{Env, GraspConfig, GraspEnv};
 use fairgrasp_rl::policies::Policy;
@@ -87,19 +88,34 @@ impl ModelIo {
     }
 
     /// Why the arm's motion under `safety` is not the one the policy trained on, if it is not:
-    /// a model trained without `[control.servo]`, or with other caps.
+    /// a model trained with targets reaching PD drives at once (neither `[control.servo]` nor
+    /// the kinematic arm drive), or with other caps.
     pub fn motion_mismatch(&self, safety: &SafetyConfig) -> Option<String> {
         let servo = self.servo();
-        if !servo.enabled {
-            return Some(
-                "this model was trained with targets reaching the drives at once, not through                  the deployment's set-point ramp; expect it to grasp less often than in                  simulation (train with configs/ppo_deploy.toml: docs/deployment.md)"
-                    .into(),
-            );
-        }
-        let trained = (
+        let arm = &self.env.inner().scene().config().arm;
+        // Both move the joints through the safety filter's ramp: the servo model every 8 ms, the
+        // kinematic drive every physics step. With both, the servo's set points are the targets
+        // the drive follows, so the tighter caps of the two are what the policy saw.
+        let kinematic = (arm.drive == ArmDrive::Kinematic).then_some((
+            arm.kinematic_speed_deg_s as f64,
+            arm.kinematic_acc_deg_s2 as f64,
+        ));
+        let servoed = servo.enabled.then_some((
             servo.max_joint_speed_deg_s as f64,
             servo.max_joint_acc_deg_s2 as f64,
-        );
+        ));
+        let trained = match (servoed, kinematic) {
+            (Some(s), Some(k)) => (s.0.min(k.0), s.1.min(k.1)),
+            (Some(caps), None) | (None, Some(caps)) => caps,
+            (None, None) => {
+                return Some(
+                    "this model was trained with targets reaching the drives at once, not through \
+                     the deployment's set-point ramp; expect it to grasp less often than in \
+                     simulation (train with configs/ppo_deploy.toml: docs/deployment.md)"
+                        .into(),
+                );
+            }
+        };
         let here = (safety.max_joint_speed_deg_s, safety.max_joint_acc_deg_s2);
         let differs = |a: f64, b: f64| (a - b).abs() > 1e-3 * a.abs().max(1.0);
         (differs(trained.0, here.0) || differs(trained.1, here.1)).then(|| {
@@ -171,5 +187,13 @@ mod tests {
             ..SafetyConfig::default()
         };
         assert!(servoed.motion_mismatch(&gentler).unwrap().contains("300"));
+        // The kinematic arm drive moves through the same ramp, with its own caps.
+        let mut config = GraspConfig::default();
+        config.scene.arm.drive = ArmDrive::Kinematic;
+        let kinematic = ModelIo::for_config(config.clone()).unwrap();
+        assert_eq!(kinematic.motion_mismatch(&safety), None);
+        config.scene.arm.kinematic_acc_deg_s2 = 2000.0;
+        let snappier = ModelIo::for_config(config).unwrap();
+        assert!(snappier.motion_mismatch(&safety).unwrap().contains("2000"));
     }
 }
