@@ -110,6 +110,14 @@ impl Mlp {
         Ok(())
     }
 
+    /// Each layer's weight (`out × in`) and bias, input layer first.
+    pub fn layer_tensors(&self) -> Vec<(&Tensor, &Tensor)> {
+        self.layers
+            .iter()
+            .map(|l| (l.weight(), l.bias().expect("Mlp layers have biases")))
+            .collect()
+    }
+
     pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
         let mut x = x.clone();
         let last = self.layers.len() - 1;

@@ -92,6 +92,11 @@ impl ActorCritic {
         obs_tensor(obs, self.obs_dim, &self.device)
     }
 
+    /// The policy and value networks (for [`crate::ppo_loss`], which runs them written out).
+    pub(crate) fn heads(&self) -> (&Mlp, &Mlp) {
+        (&self.pi, &self.vf)
+    }
+
     /// The log standard deviation of every action dimension.
     pub fn log_std(&self) -> &Tensor {
         self.log_std.as_tensor()
