@@ -13,6 +13,8 @@
 //! [`crate::fast_tanh::tanh`], its slope `1 − y²` as `y² · (−1) + 1`).
 
 use crate::fast_tanh;
+use crate::nn::Mlp;
+use candle_core::cpu::kernels::VecOps;
 use candle_core::{CpuStorage, Layout, Storage, Tensor};
 use gemm::{Parallelism, gemm};
 
@@ -75,6 +77,14 @@ pub fn matmul(
     }
 }
 
+/// candle's sum of a contiguous run of values (its order: SIMD lanes, then the tail).
+pub fn sum(values: &[f32]) -> f32 {
+    let mut out = 0.0f32;
+    // SAFETY: `values` holds `len` values; `out` is one.
+    unsafe { f32::vec_reduce_sum(values.as_ptr(), &mut out, values.len()) };
+    out
+}
+
 /// The values of f32 CPU tensors (the networks' variables), borrowed (read-locked) for one pass.
 pub struct VarValues<'a> {
     guards: Vec<(candle_core::StorageRef<'a>, &'a Layout)>,
@@ -107,6 +117,38 @@ pub struct LayerParams<'a> {
     pub bias: &'a [f32],
     pub inp: usize,
     pub out: usize,
+}
+
+/// The layers whose weights and biases are `tensors` (as [`Mlp::layer_tensors`] lists them),
+/// with their values at `values.get(offset + 2l)` and `values.get(offset + 2l + 1)`.
+pub fn layers_from<'v>(
+    values: &'v VarValues<'_>,
+    tensors: &[(&Tensor, &Tensor)],
+    offset: usize,
+) -> candle_core::Result<Vec<LayerParams<'v>>> {
+    tensors
+        .iter()
+        .enumerate()
+        .map(|(l, (w, _))| {
+            let (out, inp) = w.dims2()?;
+            Ok(LayerParams {
+                weight: values.get(offset + 2 * l)?,
+                bias: values.get(offset + 2 * l + 1)?,
+                inp,
+                out,
+            })
+        })
+        .collect()
+}
+
+/// [`forward`] through `mlp` over `batch` rows of `x`: its output, `batch × out`.
+pub fn forward_mlp(mlp: &Mlp, x: &[f32], batch: usize) -> candle_core::Result<Vec<f32>> {
+    let tensors = mlp.layer_tensors();
+    let values = VarValues::new(tensors.iter().flat_map(|(w, b)| [*w, *b]));
+    let layers = layers_from(&values, &tensors, 0)?;
+    let mut buffers = MlpBuffers::default();
+    forward(&layers, x, batch, &mut buffers);
+    Ok(buffers.outputs.pop().unwrap_or_default())
 }
 
 /// Reusable buffers of one MLP's passes over a batch: each layer's output (after tanh for hidden
@@ -226,7 +268,7 @@ pub fn backward(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::{Activation, Mlp};
+    use crate::nn::Activation;
     use candle_core::{DType, Device, Var};
     use candle_nn::{VarBuilder, VarMap};
     use rand::SeedableRng;

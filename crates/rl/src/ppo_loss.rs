@@ -12,24 +12,14 @@
 //! gradient contributions accumulated in candle's order. So the weights it trains are
 //! bit-identical to the tensor code's (tested below and on whole training runs).
 
+use crate::distributions::{HALF_LN_2PI, log_prob_term};
 use crate::error::Result;
-use crate::fused_mlp::{self, LayerParams, MlpBuffers, VarValues};
+use crate::fused_mlp::sum;
+use crate::fused_mlp::{self, MlpBuffers, VarValues};
 use crate::nn::Activation;
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
 use crate::ppo::PpoConfig;
-use candle_core::cpu::kernels::VecOps;
-
-/// ½ ln 2π, as in [`crate::distributions`].
-const HALF_LN_2PI: f64 = 0.918_938_533_204_672_8;
-
-/// candle's sum of a contiguous run of values.
-fn sum(values: &[f32]) -> f32 {
-    let mut out = 0.0f32;
-    // SAFETY: `values` holds `len` values; `out` is one.
-    unsafe { f32::vec_reduce_sum(values.as_ptr(), &mut out, values.len()) };
-    out
-}
 
 /// candle's `mean_all`: the sum times `1/n` (as f32), plus 0.
 fn mean(values: &[f32]) -> f32 {
@@ -103,22 +93,8 @@ impl FusedPpoLoss {
                 .flat_map(|(w, b)| [*w, *b])
                 .chain([policy.log_std()]),
         );
-        let layers = |offset: usize, vars: &[(&candle_core::Tensor, &candle_core::Tensor)]| {
-            vars.iter()
-                .enumerate()
-                .map(|(l, (w, _))| {
-                    let (out, inp) = w.dims2()?;
-                    Ok(LayerParams {
-                        weight: values.get(offset + 2 * l)?,
-                        bias: values.get(offset + 2 * l + 1)?,
-                        inp,
-                        out,
-                    })
-                })
-                .collect::<candle_core::Result<Vec<_>>>()
-        };
-        let pi_layers = layers(0, &pi_vars)?;
-        let vf_layers = layers(2 * pi_vars.len(), &vf_vars)?;
+        let pi_layers = fused_mlp::layers_from(&values, &pi_vars, 0)?;
+        let vf_layers = fused_mlp::layers_from(&values, &vf_vars, 2 * pi_vars.len())?;
         let log_std = values.get(2 * (pi_vars.len() + vf_vars.len()))?;
 
         // Advantages, normalised as `(A − mean) / (std + 1e-8)`.
@@ -142,7 +118,6 @@ impl FusedPpoLoss {
 
         // log π(a|s): z = (a − μ)·e^{−log σ}, Σ (z² · (−½) − log σ − ½ ln 2π).
         let inv_std: Vec<f32> = log_std.iter().map(|s| (-s).exp()).collect();
-        let half_ln_2pi = -HALF_LN_2PI as f32;
         self.diff.clear();
         self.z.clear();
         self.log_ratio.clear();
@@ -157,7 +132,7 @@ impl FusedPpoLoss {
             {
                 let d = a - mu;
                 let z = d * inv_std[j];
-                *t = ((z * z * -0.5 + 0.0) - log_std[j]) * 1.0 + half_ln_2pi;
+                *t = log_prob_term(z, log_std[j]);
                 self.diff.push(d);
                 self.z.push(z);
             }
