@@ -188,9 +188,7 @@ pub fn forward(layers: &[LayerParams<'_>], x: &[f32], batch: usize, buffers: &mu
             }
         }
         if l < last {
-            for v in out.iter_mut() {
-                *v = fast_tanh::tanh(*v);
-            }
+            fast_tanh::tanh_in_place(out);
         }
     }
 }
