@@ -10,7 +10,14 @@ use candle_core::{D, Device, Result, Tensor};
 use rand::Rng;
 
 /// ½ ln 2π.
-const HALF_LN_2PI: f64 = 0.918_938_533_204_672_8;
+pub(crate) const HALF_LN_2PI: f64 = 0.918_938_533_204_672_8;
+
+/// One action dimension's term of [`DiagGaussian::log_prob`], `z² · (−½) − log σ − ½ ln 2π`
+/// for `z = (a − μ)·e^{−log σ}`, with candle's f32 arithmetic (`x · c` is `x · c + 0`): for the
+/// code that computes log-probabilities without tensors and must agree with it bit for bit.
+pub fn log_prob_term(z: f32, log_std: f32) -> f32 {
+    ((z * z * -0.5 + 0.0) - log_std) * 1.0 + (-HALF_LN_2PI) as f32
+}
 
 /// `rows × cols` standard normal draws from `rng`, row by row (the order PPO and SAC have
 /// always drawn in, so seeded runs keep their noise).

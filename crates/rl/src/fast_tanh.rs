@@ -35,6 +35,26 @@ pub fn tanh(x: f32) -> f32 {
     x * p / q
 }
 
+/// [`tanh`] of every value, in place. Compiled a second time for AVX and chosen at run time
+/// where the CPU has it: the same operations 8 lanes wide instead of SSE's 4 (the division
+/// dominates), so the same results. The hidden layers' tanh was 15 % of a written-out PPO
+/// update on SSE; with AVX the `ppo_timing` example takes 600-630 ms of CPU for 6 iterations
+/// instead of 650-680.
+pub fn tanh_in_place(values: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX.
+        return unsafe { tanh_in_place_avx(values) };
+    }
+    values.iter_mut().for_each(|v| *v = tanh(*v));
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn tanh_in_place_avx(values: &mut [f32]) {
+    values.iter_mut().for_each(|v| *v = tanh(*v));
+}
+
 /// `x.tanh()`, with gradients (1 − tanh²), through [`tanh`] on f32 CPU tensors.
 pub fn tanh_tensor(x: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op1(FastTanh)
@@ -58,7 +78,8 @@ impl CustomOp1 for FastTanh {
                 "fast tanh takes contiguous tensors (tanh_tensor makes them so)".into(),
             ));
         };
-        let out: Vec<f32> = values[start..end].iter().map(|&v| tanh(v)).collect();
+        let mut out = values[start..end].to_vec();
+        tanh_in_place(&mut out);
         Ok((CpuStorage::F32(out), layout.shape().clone()))
     }
 
@@ -87,6 +108,13 @@ mod tests {
         assert!(tanh(f32::NAN).is_nan());
         assert_eq!(tanh(1e30), tanh(CLAMP));
         assert_eq!(tanh(-3.0), -tanh(3.0));
+        // The slice version (AVX where the CPU has it) gives the same bits.
+        let xs: Vec<f32> = (0..1001).map(|i| (i as f32 - 500.0) / 37.0).collect();
+        let mut ys = xs.clone();
+        tanh_in_place(&mut ys);
+        for (x, y) in xs.iter().zip(&ys) {
+            assert_eq!(tanh(*x).to_bits(), y.to_bits(), "tanh({x})");
+        }
     }
 
     #[test]

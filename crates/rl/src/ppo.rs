@@ -14,6 +14,7 @@ use crate::error::{Result, RlError};
 use crate::nn::{Activation, Adam};
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
+use crate::ppo_loss::{FusedPpoLoss, Minibatch, MinibatchStats};
 use candle_core::{DType, Device, Tensor};
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand::SeedableRng;
@@ -114,6 +115,52 @@ pub struct Ppo {
     /// Whether each environment's current observation starts an episode (SB3's
     /// `_last_episode_starts`).
     episode_starts: Vec<bool>,
+    /// Whether updates run the loss written out ([`crate::ppo_loss`]) where it supports the
+    /// configuration; off, candle's autograd computes the same weights, slower.
+    pub written_out_loss: bool,
+    fused: FusedPpoLoss,
+    minibatch: MinibatchData,
+}
+
+/// One minibatch gathered from the rollout buffer, row-major.
+#[derive(Default)]
+struct MinibatchData {
+    observations: Vec<f32>,
+    actions: Vec<f32>,
+    log_probs: Vec<f32>,
+    advantages: Vec<f32>,
+    returns: Vec<f32>,
+}
+
+impl MinibatchData {
+    fn gather(&mut self, b: &RolloutBuffer, indices: &[u32]) {
+        let (od, ad) = (b.obs_dim, b.act_dim);
+        self.observations.clear();
+        self.actions.clear();
+        self.log_probs.clear();
+        self.advantages.clear();
+        self.returns.clear();
+        for &i in indices {
+            let i = i as usize;
+            self.observations
+                .extend_from_slice(&b.observations[i * od..(i + 1) * od]);
+            self.actions
+                .extend_from_slice(&b.actions[i * ad..(i + 1) * ad]);
+            self.log_probs.push(b.log_probs[i]);
+            self.advantages.push(b.advantages[i]);
+            self.returns.push(b.returns[i]);
+        }
+    }
+
+    fn as_minibatch(&self) -> Minibatch<'_> {
+        Minibatch {
+            observations: &self.observations,
+            actions: &self.actions,
+            old_log_probs: &self.log_probs,
+            advantages: &self.advantages,
+            returns: &self.returns,
+        }
+    }
 }
 
 impl Ppo {
@@ -136,6 +183,9 @@ impl Ppo {
             optimizer,
             num_timesteps: 0,
             episode_starts: Vec::new(),
+            written_out_loss: true,
+            fused: FusedPpoLoss::default(),
+            minibatch: MinibatchData::default(),
         })
     }
 
@@ -229,9 +279,34 @@ impl Ppo {
         };
         let (mut pg_sum, mut v_sum, mut ent_sum, mut kl_sum, mut clip_sum, mut gn_sum, mut count) =
             (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
+        let fused = self.written_out_loss && FusedPpoLoss::supports(&c);
+        let names: Vec<String> = self.optimizer.vars().map(|(n, _)| n.to_string()).collect();
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
         'epochs: for epoch in 0..c.n_epochs {
             indices.shuffle(&mut self.rng);
             for batch in indices.chunks(c.batch_size) {
+                if fused {
+                    self.minibatch.gather(&self.buffer, batch);
+                    let s: MinibatchStats =
+                        self.fused
+                            .compute(&self.policy, &c, &self.minibatch.as_minibatch())?;
+                    if let Some(target) = c.target_kl
+                        && s.approx_kl > 1.5 * target
+                    {
+                        stats.epochs_run = epoch;
+                        break 'epochs;
+                    }
+                    let grads = self.fused.gradients(&names);
+                    let grad_norm = self.optimizer.step_with(&grads, c.max_grad_norm)?;
+                    pg_sum += s.policy_loss;
+                    v_sum += s.value_loss;
+                    ent_sum += s.entropy;
+                    kl_sum += s.approx_kl;
+                    clip_sum += s.clip_fraction;
+                    gn_sum += grad_norm as f32;
+                    count += 1;
+                    continue;
+                }
                 let idx = Tensor::from_slice(batch, batch.len(), &dev)?;
                 let obs = obs_all.index_select(&idx, 0)?;
                 let actions = act_all.index_select(&idx, 0)?;
