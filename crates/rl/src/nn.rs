@@ -5,7 +5,7 @@
 //! them.
 
 use candle_core::{DType, Device, Tensor, Var};
-use candle_nn::{Init, Linear, Module, VarBuilder, VarMap};
+use candle_nn::{Init, Linear, VarBuilder, VarMap};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -109,14 +109,34 @@ impl Mlp {
     }
 
     pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        self.forward_with(x, false)
+    }
+
+    /// The forward pass with the weights as constants: gradients reach the input but no
+    /// weight's gradient is computed. SAC's actor loss goes through the critics this way; their
+    /// weight gradients were a tenth of a gradient step, and only the actor's optimiser steps.
+    pub fn forward_detached(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        self.forward_with(x, true)
+    }
+
+    fn forward_with(&self, x: &Tensor, detached: bool) -> candle_core::Result<Tensor> {
         let mut x = x.clone();
         let last = self.layers.len() - 1;
         for (i, layer) in self.layers.iter().enumerate() {
-            x = layer.forward(&x)?;
+            let (mut w, mut b) = (layer.weight().clone(), layer.bias().cloned());
+            if detached {
+                w = w.detach();
+                b = b.map(|b| b.detach());
+            }
+            // What candle-nn's `Linear` computes, with the bias added by one op.
+            x = x.matmul(&w.t()?)?;
+            if let Some(b) = &b {
+                x = crate::fused::add_bias(&x, b)?;
+            }
             if i < last {
                 x = match self.activation {
                     Activation::Tanh => crate::fast_tanh::tanh_tensor(&x)?,
-                    Activation::Relu => x.relu()?,
+                    Activation::Relu => crate::fused::relu(&x)?,
                 };
             }
         }
@@ -126,16 +146,93 @@ impl Mlp {
 
 /// Adam (Kingma & Ba 2015) over the variables of a [`VarMap`], with its state exposed for
 /// checkpoints.
+///
+/// The moments are plain vectors and each variable is updated in place in one pass
+/// ([`AdamUpdate`]): the dozen candle ops per variable this replaced allocated a tensor each and
+/// took a fifth of a SAC gradient step. The pass computes exactly what those ops did (same f32
+/// operations in the same order), so results are unchanged bit for bit.
 pub struct Adam {
     /// Variables by name, sorted so the order is stable.
     vars: Vec<(String, Var)>,
-    first: Vec<Tensor>,
-    second: Vec<Tensor>,
+    first: Vec<Vec<f32>>,
+    second: Vec<Vec<f32>>,
     pub lr: f64,
     pub beta1: f64,
     pub beta2: f64,
     pub eps: f64,
     step: u64,
+}
+
+/// One variable's Adam step, applied in place to its storage.
+struct AdamUpdate<'a> {
+    grad: &'a [f32],
+    m: std::cell::RefCell<&'a mut [f32]>,
+    v: std::cell::RefCell<&'a mut [f32]>,
+    /// Multipliers as candle's scalar ops applied them (f64 rounded to f32).
+    scale: Option<f32>,
+    beta1: f32,
+    one_minus_beta1: f32,
+    beta2: f32,
+    one_minus_beta2: f32,
+    inv_bias1: f32,
+    inv_bias2: f32,
+    eps: f32,
+    lr: f32,
+}
+
+impl candle_core::InplaceOp1 for AdamUpdate<'_> {
+    fn name(&self) -> &'static str {
+        "adam-update"
+    }
+
+    fn cpu_fwd(
+        &self,
+        storage: &mut candle_core::CpuStorage,
+        layout: &candle_core::Layout,
+    ) -> candle_core::Result<()> {
+        let candle_core::CpuStorage::F32(data) = storage else {
+            candle_core::bail!("Adam updates f32 variables only");
+        };
+        let Some((start, end)) = layout.contiguous_offsets() else {
+            candle_core::bail!("Adam needs contiguous variables");
+        };
+        let (mut m, mut v) = (self.m.borrow_mut(), self.v.borrow_mut());
+        let w = &mut data[start..end];
+        if [self.grad.len(), m.len(), v.len()] != [w.len(); 3] {
+            candle_core::bail!("Adam: gradient or moments do not match the variable");
+        }
+        // Zipped slices (no bounds checks), so the loop vectorises. `x * c + 0.0` is candle's
+        // affine op (it turns −0 into +0, so it is kept).
+        let moments = m.iter_mut().zip(v.iter_mut());
+        for ((w, &g), (m, v)) in w.iter_mut().zip(self.grad).zip(moments) {
+            let g = match self.scale {
+                Some(s) => g * s + 0.0,
+                None => g,
+            };
+            let mi = (*m * self.beta1 + 0.0) + (g * self.one_minus_beta1 + 0.0);
+            let vi = (*v * self.beta2 + 0.0) + ((g * g) * self.one_minus_beta2 + 0.0);
+            let denom = (vi * self.inv_bias2 + 0.0).sqrt() + self.eps;
+            let update = (mi * self.inv_bias1 + 0.0) / denom;
+            *w -= update * self.lr + 0.0;
+            *m = mi;
+            *v = vi;
+        }
+        Ok(())
+    }
+}
+
+/// The values of a contiguous f32 tensor, read in place.
+pub(crate) fn with_f32_slice<R>(t: &Tensor, f: impl FnOnce(&[f32]) -> R) -> candle_core::Result<R> {
+    let t = t.contiguous()?;
+    let (storage, layout) = t.storage_and_layout();
+    let candle_core::Storage::Cpu(cpu) = &*storage else {
+        candle_core::bail!("f32 CPU tensors only");
+    };
+    let data = cpu.as_slice::<f32>()?;
+    let (start, end) = layout
+        .contiguous_offsets()
+        .ok_or_else(|| candle_core::Error::Msg("non-contiguous tensor".into()))?;
+    Ok(f(&data[start..end]))
 }
 
 impl Adam {
@@ -148,16 +245,10 @@ impl Adam {
             .map(|(k, v)| (k.clone(), v.clone()))
             .collect();
         vars.sort_by(|a, b| a.0.cmp(&b.0));
-        let zeros = |v: &Var| v.as_tensor().zeros_like();
+        let zeros = |v: &Var| vec![0.0f32; v.as_tensor().elem_count()];
         Ok(Self {
-            first: vars
-                .iter()
-                .map(|(_, v)| zeros(v))
-                .collect::<candle_core::Result<_>>()?,
-            second: vars
-                .iter()
-                .map(|(_, v)| zeros(v))
-                .collect::<candle_core::Result<_>>()?,
+            first: vars.iter().map(|(_, v)| zeros(v)).collect(),
+            second: vars.iter().map(|(_, v)| zeros(v)).collect(),
             vars,
             lr,
             beta1: 0.9,
@@ -167,24 +258,26 @@ impl Adam {
         })
     }
 
-    /// One step on `loss`, with the global gradient norm clipped to `max_grad_norm`.
-    /// Returns the gradient norm before clipping.
+    /// One step on `loss`, with the global gradient norm clipped to `max_grad_norm` (0: no
+    /// clipping, and the norm is not computed). Returns the gradient norm before clipping.
     pub fn backward_step(&mut self, loss: &Tensor, max_grad_norm: f64) -> candle_core::Result<f64> {
         let grads = loss.backward()?;
         let mut grad_list = Vec::with_capacity(self.vars.len());
         let mut sq = 0.0f64;
         for (_, var) in &self.vars {
             let g = grads.get(var).cloned();
-            if let Some(g) = &g {
+            if max_grad_norm > 0.0
+                && let Some(g) = &g
+            {
                 sq += g.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
             }
             grad_list.push(g);
         }
         let norm = sq.sqrt();
         let scale = if max_grad_norm > 0.0 && norm > max_grad_norm {
-            max_grad_norm / (norm + 1e-6)
+            Some((max_grad_norm / (norm + 1e-6)) as f32)
         } else {
-            1.0
+            None
         };
         self.step += 1;
         let t = self.step as i32;
@@ -192,14 +285,24 @@ impl Adam {
         let bias2 = 1.0 - self.beta2.powi(t);
         for (i, g) in grad_list.into_iter().enumerate() {
             let Some(g) = g else { continue };
-            let g = if scale < 1.0 { (g * scale)? } else { g };
-            let m = ((&self.first[i] * self.beta1)? + (&g * (1.0 - self.beta1))?)?;
-            let v = ((&self.second[i] * self.beta2)? + (g.sqr()? * (1.0 - self.beta2))?)?;
-            let update = ((&m / bias1)? / ((&v / bias2)?.sqrt()? + self.eps)?)?;
-            let var = &self.vars[i].1;
-            var.set(&(var.as_tensor() - (update * self.lr)?)?)?;
-            self.first[i] = m;
-            self.second[i] = v;
+            let (first, second) = (&mut self.first[i], &mut self.second[i]);
+            with_f32_slice(&g, |grad| {
+                let op = AdamUpdate {
+                    grad,
+                    m: std::cell::RefCell::new(first),
+                    v: std::cell::RefCell::new(second),
+                    scale,
+                    beta1: self.beta1 as f32,
+                    one_minus_beta1: (1.0 - self.beta1) as f32,
+                    beta2: self.beta2 as f32,
+                    one_minus_beta2: (1.0 - self.beta2) as f32,
+                    inv_bias1: (1.0 / bias1) as f32,
+                    inv_bias2: (1.0 / bias2) as f32,
+                    eps: self.eps as f32,
+                    lr: self.lr as f32,
+                };
+                self.vars[i].1.as_tensor().inplace_op1(&op)
+            })??;
         }
         Ok(norm)
     }
@@ -208,8 +311,11 @@ impl Adam {
     pub fn state(&self) -> candle_core::Result<HashMap<String, Tensor>> {
         let mut out = HashMap::new();
         for (i, (name, _)) in self.vars.iter().enumerate() {
-            out.insert(format!("adam.m.{name}"), self.first[i].clone());
-            out.insert(format!("adam.v.{name}"), self.second[i].clone());
+            let shape = self.vars[i].1.shape();
+            for (kind, values) in [("m", &self.first[i]), ("v", &self.second[i])] {
+                let t = Tensor::from_slice(values, shape, &Device::Cpu)?;
+                out.insert(format!("adam.{kind}.{name}"), t);
+            }
         }
         out.insert(
             "adam.step".into(),
@@ -233,7 +339,10 @@ impl Adam {
                         var.dims()
                     ));
                 }
-                *slot = t.to_dtype(DType::F32).map_err(|e| e.to_string())?;
+                *slot = t
+                    .to_dtype(DType::F32)
+                    .and_then(|t| t.flatten_all()?.to_vec1::<f32>())
+                    .map_err(|e| e.to_string())?;
             }
         }
         let step = state
