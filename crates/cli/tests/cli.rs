@@ -573,7 +573,7 @@ fn bench_sac_prints_gradient_steps_at_the_default_sizes() {
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     assert!(v["gradient_steps_per_s"].as_f64().unwrap() > 0.0, "{v}");
     assert_eq!(v["batch_size"], 32);
-    assert_eq!(v["net_arch"], serde_json::json!([256, 256]));
+    assert_eq!(v["net_arch"], serde_json::json!([128, 128]));
     // The grasp task's rich observation and Cartesian actions (configs/sac_grasp.toml).
     assert_eq!(
         (v["obs_dim"].as_u64(), v["act_dim"].as_u64()),
