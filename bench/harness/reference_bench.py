@@ -5,6 +5,7 @@ fairgrasp against). Each subcommand prints one JSON object on stdout; `bench/run
     python reference_bench.py physics  --seconds 3
     python reference_bench.py env      --seconds 3 --num-envs 4
     python reference_bench.py train    --timesteps 24576 --out DIR [--max-seconds S --eval-freq N]
+    python reference_bench.py sac-gradient-steps --seconds 3 --obs-dim 40 --act-dim 5
 """
 
 from __future__ import annotations
@@ -358,6 +359,68 @@ def cmd_train(args) -> None:
     emit(result)
 
 
+# ── sac-gradient-steps ────────────────────────────────────────────────────
+
+
+def cmd_sac_gradient_steps(args) -> None:
+    """SB3 SAC gradient steps per second: `model.train()` on a replay buffer of random
+    transitions, with `fairgrasp bench sac`'s sizes (the networks of configs/sac_grasp.toml)."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.logger import configure
+
+    class Boxes(gym.Env):
+        """Only the spaces: SAC needs an env to size its networks, never steps it here."""
+
+        observation_space = gym.spaces.Box(-np.inf, np.inf, (args.obs_dim,), np.float32)
+        action_space = gym.spaces.Box(-1.0, 1.0, (args.act_dim,), np.float32)
+
+    net_arch = [int(w) for w in args.net_arch.split(",")]
+    model = SAC(
+        "MlpPolicy",
+        Boxes(),
+        buffer_size=args.transitions,
+        batch_size=args.batch_size,
+        gamma=0.95,
+        policy_kwargs={"net_arch": net_arch},
+        seed=0,
+        device="cpu",
+    )
+    model.set_logger(configure(None, []))
+    rng = np.random.default_rng(0)
+    n = args.transitions
+    rb = model.replay_buffer
+    rb.observations[:n] = rng.standard_normal((n, 1, args.obs_dim), dtype=np.float32)
+    rb.next_observations[:n] = rng.standard_normal((n, 1, args.obs_dim), dtype=np.float32)
+    rb.actions[:n] = rng.uniform(-1, 1, (n, 1, args.act_dim)).astype(np.float32)
+    rb.rewards[:n] = rng.random((n, 1), dtype=np.float32)
+    rb.full = True
+    # Calls of 5 steps until the time is up (`rate`'s chunks of 50 calls would run for minutes
+    # where torch's threads compete with other work).
+    per_call = 5
+    model.train(gradient_steps=per_call, batch_size=args.batch_size)
+    start, cpu_start = time.perf_counter(), time.process_time()
+    steps = 0
+    while time.perf_counter() - start < args.seconds:
+        model.train(gradient_steps=per_call, batch_size=args.batch_size)
+        steps += per_call
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    emit(
+        {
+            "gradient_steps_per_s": steps / wall,
+            # All of torch's threads' CPU time (its idle threads spin).
+            "gradient_steps_per_cpu_s": steps / cpu if cpu > 0 else None,
+            "batch_size": args.batch_size,
+            "net_arch": net_arch,
+            "obs_dim": args.obs_dim,
+            "act_dim": args.act_dim,
+            "torch": torch.__version__,
+            "torch_threads": torch.get_num_threads(),
+        }
+    )
+
+
 def peak_memory_mib() -> float | None:
     """Peak resident memory of this process plus that of its largest finished child (MiB)."""
     try:
@@ -392,6 +455,13 @@ def main() -> None:
     p.add_argument("--eval-freq", type=int, default=0)
     p.add_argument("--eval-episodes", type=int, default=50)
     p.add_argument("--held-out-episodes", type=int, default=0)
+    p = sub.add_parser("sac-gradient-steps", help=cmd_sac_gradient_steps.__doc__)
+    p.add_argument("--seconds", type=float, default=3.0)
+    p.add_argument("--obs-dim", type=int, required=True)
+    p.add_argument("--act-dim", type=int, required=True)
+    p.add_argument("--net-arch", default="256,256")
+    p.add_argument("--batch-size", type=int, default=256)
+    p.add_argument("--transitions", type=int, default=10_000)
     args = parser.parse_args()
     {
         "check": cmd_check,
@@ -399,6 +469,7 @@ def main() -> None:
         "mujoco-physics": cmd_mujoco_physics,
         "env": cmd_env,
         "train": cmd_train,
+        "sac-gradient-steps": cmd_sac_gradient_steps,
     }[args.command](args)
 
 

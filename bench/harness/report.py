@@ -1,5 +1,5 @@
 """Writes docs/benchmarks.md from the results `bench/run` collected: the machine, the commands and
-the four comparisons of fairgrasp against the PyBullet + Stable-Baselines3 reference, each as a
+the five comparisons of fairgrasp against the PyBullet + Stable-Baselines3 reference, each as a
 ratio of ours to the reference. The learning section (`fairgrasp bench learning`) is kept as it is.
 
     python report.py --results runs/bench/reference_TIMESTAMP --out docs/benchmarks.md
@@ -122,6 +122,39 @@ def plot(ours: list[dict], reference: list[dict], budget_min: float, path: Path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, format="svg", metadata={"Date": None})
     plt.close(fig)
+
+
+def sac_section(ours: list[dict], reference: list[dict]) -> list[str]:
+    """Section 5: SAC gradient steps per second, ours against SB3's `SAC.train`."""
+    key = "gradient_steps_per_s"
+    o, r = median(ours, key), median(reference, key)
+    first = reference[0]
+    net = ", ".join(str(w) for w in first["net_arch"])
+    lines = [
+        "### 5. SAC gradient steps per second",
+        "",
+        f"One gradient step of SAC (twin critics, actor, entropy coefficient, Polyak update) on a "
+        f"minibatch of {first['batch_size']} from a replay buffer of random transitions, "
+        f"[{net}] ReLU networks, {first['obs_dim']} observation and {first['act_dim']} action "
+        "values (the sizes of configs/sac_grasp.toml): `fairgrasp bench sac` (candle, "
+        f"RAYON_NUM_THREADS={ours[0].get('rayon_threads') or 'unset'}) against SB3's "
+        f"`SAC.train(gradient_steps, batch_size)` (torch {first['torch']}, "
+        f"{first['torch_threads']} threads, its default).",
+        "",
+        "| | fairgrasp | SB3 | ratio |",
+        "|---|---:|---:|---:|",
+        f"| gradient steps/s | {o:,.1f}{spread(ours, key)} | {r:,.1f}{spread(reference, key)} | "
+        f"{ratio(o, r)} |",
+    ]
+    cpu_key = "gradient_steps_per_cpu_s"
+    if all(row.get(cpu_key) for row in ours + reference):
+        o, r = median(ours, cpu_key), median(reference, cpu_key)
+        lines.append(
+            f"| per second of CPU time (all threads; less sensitive to other load) | "
+            f"{o:,.1f}{spread(ours, cpu_key)} | {r:,.1f}{spread(reference, cpu_key)} | "
+            f"{ratio(o, r)} |"
+        )
+    return lines + [""]
 
 
 def reference_section(results: Path, image: Path, out: Path) -> str:
@@ -364,6 +397,10 @@ def reference_section(results: Path, image: Path, out: Path) -> str:
         w("")
         w("</details>")
         w("")
+
+    sac_o_path = results / "sac_gradient_ours.jsonl"
+    if sac_o_path.exists():
+        lines += sac_section(read_jsonl(sac_o_path), read_jsonl(results / "sac_gradient_reference.jsonl"))
 
     w("### Commands")
     w("")

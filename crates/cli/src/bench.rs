@@ -21,6 +21,9 @@ pub enum BenchCommand {
     /// The learning benchmark: train PPO and SAC with their defaults, evaluate on held-out
     /// episodes, write success against steps and wall time to docs/benchmarks.md.
     Learning(crate::bench_learning::LearningBenchArgs),
+    /// SAC gradient steps per second at the default grasp training's sizes, on a replay buffer
+    /// of random transitions.
+    Sac(crate::bench_sac::SacBenchArgs),
     /// Frames per second of the CPU renderer (RGB, depth and segmentation together) at 84×84
     /// and 640×480, one thread, the default camera on a reset scene.
     Render(RenderBenchArgs),
@@ -71,6 +74,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Env(args) => env(&args),
         BenchCommand::Learning(args) => crate::bench_learning::run(&args),
         BenchCommand::Render(args) => render(&args),
+        BenchCommand::Sac(args) => crate::bench_sac::run(&args),
     }
 }
 

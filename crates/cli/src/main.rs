@@ -3,6 +3,7 @@
 
 mod bench;
 mod bench_learning;
+mod bench_sac;
 mod commission_cmd;
 mod demo;
 mod deploy_cmd;

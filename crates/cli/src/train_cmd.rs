@@ -9,12 +9,13 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
-    /// Training configuration (TOML; every key: configs/ppo_grasp.toml, configs/sac_grasp.toml).
+    /// Training configuration (TOML; every key: configs/ppo_grasp.toml, configs/sac_grasp.toml,
+    /// configs/td3_grasp.toml).
     /// Without it, the built-in default of the algorithm.
     #[arg(long, conflicts_with = "resume")]
     pub config: Option<PathBuf>,
-    /// Algorithm: ppo or sac (overrides the config's `algo`).
-    #[arg(long, value_parser = ["ppo", "sac"], conflicts_with = "resume")]
+    /// Algorithm: ppo, sac or td3 (overrides the config's `algo`).
+    #[arg(long, value_parser = ["ppo", "sac", "td3"], conflicts_with = "resume")]
     pub algo: Option<String>,
     /// The environment to learn (`fairgrasp env list`), overriding the config's `env_id`
     /// [default: FaArmGrasp-v0].

@@ -337,6 +337,7 @@ fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_the
         act_dim: 1,
         ppo: Some(config),
         sac: None,
+        td3: None,
         env_id: "Pendulum-v1".into(),
         env: serde_json::json!({}),
         normalization: None,
@@ -552,4 +553,32 @@ fn record_writes_a_gif_of_a_policy_s_episodes_with_the_outcome_shown() {
         "{}",
         text(&out).1
     );
+}
+
+#[test]
+fn bench_sac_prints_gradient_steps_at_the_default_sizes() {
+    let out = fairgrasp(&[
+        "bench",
+        "sac",
+        "--seconds",
+        "0.01",
+        "--transitions",
+        "300",
+        "--set",
+        "sac.batch_size=32",
+        "--json",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert!(v["gradient_steps_per_s"].as_f64().unwrap() > 0.0, "{v}");
+    assert_eq!(v["batch_size"], 32);
+    assert_eq!(v["net_arch"], serde_json::json!([128, 128]));
+    // The grasp task's rich observation and Cartesian actions (configs/sac_grasp.toml).
+    assert_eq!(
+        (v["obs_dim"].as_u64(), v["act_dim"].as_u64()),
+        (Some(38), Some(5))
+    );
+    let (_, stderr) = text(&fairgrasp(&["bench", "sac", "--set", "sac.batch_size=0"]));
+    assert!(stderr.contains("sac.batch_size"), "{stderr}");
 }

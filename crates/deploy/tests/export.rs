@@ -96,6 +96,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
         act_dim,
         ppo,
         sac,
+        td3: None,
         env_id: case.env_id.into(),
         env: case.env.clone(),
         normalization,

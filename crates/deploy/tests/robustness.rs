@@ -41,6 +41,7 @@ fn tiny_model(dir: &Path) {
         act_dim,
         ppo: Some(ppo_config),
         sac: None,
+        td3: None,
         env_id: ENV_ID.into(),
         env: serde_json::to_value(&config).unwrap(),
         normalization: None,

@@ -85,6 +85,33 @@ pub fn load_varmap(varmap: &candle_nn::VarMap, weights: &TensorMap) -> Result<()
     Ok(())
 }
 
+/// Loads weights into groups of variables told apart by name prefix (`actor.`, `critic.`, …).
+/// A tensor of no group, or a missing or mis-shaped one, is an error that names it; `scratch`
+/// (groups of the same shapes, e.g. a zeroed copy of the networks) takes every group first, so
+/// a mismatch in a late group leaves the earlier ones of `groups` untouched.
+pub fn load_grouped(
+    groups: &[(&str, &candle_nn::VarMap)],
+    scratch: &[(&str, &candle_nn::VarMap)],
+    weights: &TensorMap,
+) -> Result<()> {
+    let mut parts = vec![TensorMap::new(); groups.len()];
+    for (name, t) in weights {
+        let Some(g) = groups.iter().position(|(p, _)| name.starts_with(p)) else {
+            return Err(RlError::Model(format!(
+                "the weights hold tensor `{name}`, which this network does not have"
+            )));
+        };
+        parts[g].insert(name.clone(), t.clone());
+    }
+    for ((_, varmap), part) in scratch.iter().zip(&parts) {
+        load_varmap(varmap, part)?;
+    }
+    for ((_, varmap), part) in groups.iter().zip(&parts) {
+        load_varmap(varmap, part)?;
+    }
+    Ok(())
+}
+
 /// The tensors of `varmap` by name, prefixed with `prefix`.
 pub fn varmap_tensors(varmap: &candle_nn::VarMap, prefix: &str) -> TensorMap {
     varmap

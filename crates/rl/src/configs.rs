@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 pub const PPO_GRASP_TOML: &str = include_str!("../../../configs/ppo_grasp.toml");
 pub const SAC_GRASP_TOML: &str = include_str!("../../../configs/sac_grasp.toml");
+pub const TD3_GRASP_TOML: &str = include_str!("../../../configs/td3_grasp.toml");
 pub const PPO_PICK_PLACE_TOML: &str = include_str!("../../../configs/ppo_pick_place.toml");
 pub const PPO_SORT_TOML: &str = include_str!("../../../configs/ppo_sort.toml");
 
@@ -16,8 +17,10 @@ pub fn builtin_config(env_id: &str, algo: &str) -> (&'static str, bool) {
         ("FaArmPickPlace-v0", "ppo") => (PPO_PICK_PLACE_TOML, true),
         ("FaArmSort-v0", "ppo") => (PPO_SORT_TOML, true),
         (fairgrasp_env::ENV_ID, "sac") => (SAC_GRASP_TOML, true),
+        (fairgrasp_env::ENV_ID, "td3") => (TD3_GRASP_TOML, true),
         (fairgrasp_env::ENV_ID, _) => (PPO_GRASP_TOML, true),
         (_, "sac") => (SAC_GRASP_TOML, false),
+        (_, "td3") => (TD3_GRASP_TOML, false),
         _ => (PPO_GRASP_TOML, false),
     }
 }
@@ -84,7 +87,7 @@ mod tests {
     #[test]
     fn every_builtin_config_parses_and_untuned_ones_take_the_envs_defaults() {
         for id in fairgrasp_env::registry::ids() {
-            for algo in ["ppo", "sac"] {
+            for algo in ["ppo", "sac", "td3"] {
                 let table = builtin_table(id, algo).unwrap();
                 let config = TrainConfig::from_toml_str(
                     &table.to_string(),

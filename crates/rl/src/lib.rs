@@ -17,15 +17,18 @@ pub mod distributions;
 pub mod error;
 pub mod evaluation;
 pub mod fast_tanh;
+pub mod fused;
 pub mod fused_mlp;
 pub mod logger;
 pub mod model;
 pub mod nn;
+pub mod off_policy;
 pub mod policies;
 pub mod ppo;
 pub mod ppo_loss;
 pub mod sac;
 pub mod save_util;
+pub mod td3;
 pub mod train;
 
 pub use fairgrasp_env as env;

@@ -11,6 +11,7 @@ use crate::error::{Result, RlError};
 use crate::ppo::PpoConfig;
 use crate::sac::SacConfig;
 use crate::save_util::write_atomic;
+use crate::td3::Td3Config;
 use candle_core::Device;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -28,7 +29,7 @@ const V1_ENV_ID: &str = "FaArmGrasp-v0";
 #[serde(deny_unknown_fields)]
 pub struct ModelMeta {
     pub format_version: u32,
-    /// `"ppo"` or `"sac"`.
+    /// `"ppo"`, `"sac"` or `"td3"`.
     pub algo: String,
     pub obs_dim: usize,
     pub act_dim: usize,
@@ -36,6 +37,8 @@ pub struct ModelMeta {
     pub ppo: Option<PpoConfig>,
     #[serde(default)]
     pub sac: Option<SacConfig>,
+    #[serde(default)]
+    pub td3: Option<Td3Config>,
     /// Id of the environment the model was trained on (`"FaArmGrasp-v0"`).
     pub env_id: String,
     /// Its configuration, as the environment registry writes and parses it (opaque here).

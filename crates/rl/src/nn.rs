@@ -6,7 +6,7 @@
 
 use candle_core::cpu::kernels::VecOps;
 use candle_core::{CpuStorage, DType, Device, InplaceOp1, Layout, Tensor, Var};
-use candle_nn::{Init, Linear, Module, VarBuilder, VarMap};
+use candle_nn::{Init, Linear, VarBuilder, VarMap};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::cell::Cell;
@@ -119,14 +119,34 @@ impl Mlp {
     }
 
     pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        self.forward_with(x, false)
+    }
+
+    /// The forward pass with the weights as constants: gradients reach the input but no
+    /// weight's gradient is computed. SAC's actor loss goes through the critics this way; their
+    /// weight gradients were a tenth of a gradient step, and only the actor's optimiser steps.
+    pub fn forward_detached(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        self.forward_with(x, true)
+    }
+
+    fn forward_with(&self, x: &Tensor, detached: bool) -> candle_core::Result<Tensor> {
         let mut x = x.clone();
         let last = self.layers.len() - 1;
         for (i, layer) in self.layers.iter().enumerate() {
-            x = layer.forward(&x)?;
+            let (mut w, mut b) = (layer.weight().clone(), layer.bias().cloned());
+            if detached {
+                w = w.detach();
+                b = b.map(|b| b.detach());
+            }
+            // What candle-nn's `Linear` computes, with the bias added by one op.
+            x = x.matmul(&w.t()?)?;
+            if let Some(b) = &b {
+                x = crate::fused::add_bias(&x, b)?;
+            }
             if i < last {
                 x = match self.activation {
                     Activation::Tanh => crate::fast_tanh::tanh_tensor(&x)?,
-                    Activation::Relu => x.relu()?,
+                    Activation::Relu => crate::fused::relu(&x)?,
                 };
             }
         }
@@ -156,6 +176,20 @@ pub struct Adam {
     step: u64,
     /// Squared gradient values, for the norm.
     scratch: Vec<f32>,
+}
+
+/// The values of a contiguous f32 tensor, read in place.
+pub(crate) fn with_f32_slice<R>(t: &Tensor, f: impl FnOnce(&[f32]) -> R) -> candle_core::Result<R> {
+    let t = t.contiguous()?;
+    let (storage, layout) = t.storage_and_layout();
+    let candle_core::Storage::Cpu(cpu) = &*storage else {
+        candle_core::bail!("f32 CPU tensors only");
+    };
+    let data = cpu.as_slice::<f32>()?;
+    let (start, end) = layout
+        .contiguous_offsets()
+        .ok_or_else(|| candle_core::Error::Msg("non-contiguous tensor".into()))?;
+    Ok(f(&data[start..end]))
 }
 
 impl Adam {

@@ -1,9 +1,10 @@
 //! Soft Actor-Critic (Haarnoja et al. 2018) with twin critics and a learnt entropy coefficient,
 //! read top to bottom like CleanRL's `sac_continuous_action.py`, with SB3's SAC semantics.
 //!
-//! Per iteration: one step of every environment (uniformly random actions for the first
-//! `learning_starts` steps), its transitions into the replay buffer, then on average `utd_ratio`
-//! gradient steps per transition. A gradient step, on a minibatch `(s, a, r, s', d)`:
+//! Per iteration ([`crate::off_policy`], shared with TD3): one step of every environment
+//! (uniformly random actions for the first `learning_starts` steps), its transitions into the
+//! replay buffer, then on average `utd_ratio` gradient steps per transition. A gradient step, on
+//! a minibatch `(s, a, r, s', d)`:
 //! - critics: `y = r + γ (1 − d) (min Q'(s', a') − α log π(a'|s'))`, `a' ~ π(·|s')`, minimise
 //!   `½ Σᵢ (Qᵢ(s, a) − y)²`;
 //! - actor: minimise `α log π(ã|s) − min Q(s, ã)`, `ã ~ π(·|s)` reparameterised;
@@ -14,19 +15,16 @@
 //! The policy is a tanh-squashed Gaussian, so actions lie in `[-1, 1]`: the environments must
 //! act in that box (the driver wraps them in `RescaleAction`).
 
-use crate::algorithm::{
-    Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
-};
-use crate::buffers::{ReplayBuffer, ReplaySample};
-use crate::distributions::standard_normal_tensor;
+use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
+use crate::buffers::ReplayBuffer;
 use crate::error::{Result, RlError};
 use crate::nn::{Activation, Adam};
+use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, unprefixed};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::sac_policy::{SacActor, SacPolicy};
-use candle_core::{DType, Device, Tensor, Var};
+use candle_core::{DType, Device, Var};
 use candle_nn::{VarBuilder, VarMap};
 use fairgrasp_env::{VecStep, VectorEnv};
-use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -194,26 +192,8 @@ impl Networks {
         act_dim: usize,
         config: &SacConfig,
     ) -> Result<()> {
-        let groups = self.groups();
-        let mut parts = vec![TensorMap::new(); groups.len()];
-        for (name, t) in weights {
-            let Some(g) = groups.iter().position(|(p, _)| name.starts_with(p)) else {
-                return Err(RlError::Model(format!(
-                    "the weights hold tensor `{name}`, which this network does not have"
-                )));
-            };
-            parts[g].insert(name.clone(), t.clone());
-        }
-        // `load_varmap` checks one group before changing it; trying every group on scratch
-        // networks first means a mismatch in a later group leaves the earlier ones untouched.
         let scratch = Networks::zeroed(obs_dim, act_dim, config)?;
-        for ((_, varmap), part) in scratch.groups().into_iter().zip(&parts) {
-            load_varmap(varmap, part)?;
-        }
-        for ((_, varmap), part) in groups.into_iter().zip(&parts) {
-            load_varmap(varmap, part)?;
-        }
-        Ok(())
+        load_grouped(&self.groups(), &scratch.groups(), weights)
     }
 
     /// The actor alone (for acting).
@@ -242,7 +222,8 @@ struct StepStats {
     ent_coef_loss: f32,
 }
 
-/// The SAC learner: networks, optimisers, replay buffer and random stream.
+/// The SAC learner: networks and optimisers on the shared off-policy core (replay buffer,
+/// random stream, learn loop).
 pub struct Sac {
     pub config: SacConfig,
     nets: Networks,
@@ -251,18 +232,7 @@ pub struct Sac {
     /// The optimiser of log α, when it is learnt.
     alpha_opt: Option<Adam>,
     target_entropy: f32,
-    buffer: ReplayBuffer,
-    /// Reused minibatch storage.
-    sample: ReplaySample,
-    rng: ChaCha8Rng,
-    num_timesteps: u64,
-    /// Gradient steps owed but not yet taken (fractional when `utd_ratio × n_envs` is not an
-    /// integer).
-    grad_accumulator: f64,
-    /// Gradient steps taken so far.
-    n_updates: u64,
-    obs_dim: usize,
-    act_dim: usize,
+    core: OffPolicyCore,
 }
 
 impl Sac {
@@ -274,14 +244,16 @@ impl Sac {
         seed: u64,
     ) -> Result<Self> {
         validate(&config, n_envs)?;
-        if obs_dim == 0 || act_dim == 0 {
-            return Err(RlError::Other(format!(
-                "SAC needs observations and actions, got {obs_dim} and {act_dim} values"
-            )));
-        }
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let settings = LoopSettings {
+            buffer_size: config.buffer_size,
+            learning_starts: config.learning_starts,
+            batch_size: config.batch_size,
+            utd_ratio: config.utd_ratio,
+            save_replay_buffer: config.save_replay_buffer,
+        };
+        let mut core = OffPolicyCore::new("sac", settings, obs_dim, act_dim, seed)?;
         let nets = Networks::zeroed(obs_dim, act_dim, &config)?;
-        nets.policy.init_weights(&mut rng)?;
+        nets.policy.init_weights(&mut core.rng)?;
         let lr = config.learning_rate;
         Ok(Self {
             actor_opt: Adam::new(&nets.policy.actor.varmap, lr)?,
@@ -291,27 +263,49 @@ impl Sac {
                 None => None,
             },
             target_entropy: config.target_entropy.unwrap_or(-(act_dim as f32)),
-            buffer: ReplayBuffer::new(config.buffer_size, obs_dim, act_dim),
-            sample: ReplaySample::default(),
             nets,
-            rng,
-            num_timesteps: 0,
-            grad_accumulator: 0.0,
-            n_updates: 0,
-            obs_dim,
-            act_dim,
+            core,
             config,
         })
     }
 
     /// Gradient steps taken so far.
     pub fn n_updates(&self) -> u64 {
-        self.n_updates
+        self.core.n_updates
     }
 
     /// Transitions in the replay buffer.
     pub fn replay_len(&self) -> usize {
-        self.buffer.len()
+        self.core.buffer.len()
+    }
+
+    /// The replay buffer (to fill it directly, as `fairgrasp bench sac` does).
+    pub fn replay_buffer_mut(&mut self) -> &mut ReplayBuffer {
+        &mut self.core.buffer
+    }
+
+    /// `gradient_steps` gradient steps on minibatches from the replay buffer (SB3's
+    /// `SAC.train`); returns the `train/*` means to log. The buffer must not be empty.
+    pub fn train(&mut self, gradient_steps: u64) -> Result<Vec<(&'static str, f32)>> {
+        let mut sum = StepStats::default();
+        for _ in 0..gradient_steps {
+            let s = self.gradient_step()?;
+            sum.actor_loss += s.actor_loss;
+            sum.critic_loss += s.critic_loss;
+            sum.ent_coef += s.ent_coef;
+            sum.ent_coef_loss += s.ent_coef_loss;
+        }
+        let k = gradient_steps.max(1) as f32;
+        let mut stats = vec![
+            ("train/actor_loss", sum.actor_loss / k),
+            ("train/critic_loss", sum.critic_loss / k),
+            ("train/ent_coef", sum.ent_coef / k),
+        ];
+        if self.alpha_opt.is_some() {
+            stats.push(("train/ent_coef_loss", sum.ent_coef_loss / k));
+        }
+        stats.push(("train/learning_rate", self.config.learning_rate as f32));
+        Ok(stats)
     }
 
     /// The entropy coefficient α now.
@@ -323,52 +317,38 @@ impl Sac {
         })
     }
 
-    /// `rows × act_dim` standard normal noise from the learner's stream (not candle's unseeded
-    /// one), so a seeded run is reproducible.
-    fn noise(&mut self, rows: usize) -> Result<Tensor> {
-        Ok(standard_normal_tensor(&mut self.rng, rows, self.act_dim)?)
-    }
-
     /// One gradient step of the critics, the actor and α on a minibatch from the replay buffer.
     fn gradient_step(&mut self) -> Result<StepStats> {
-        let (b, od, ad) = (self.config.batch_size, self.obs_dim, self.act_dim);
-        let dev = &Device::Cpu;
-        self.buffer.sample_into(b, &mut self.rng, &mut self.sample);
-        let s = &self.sample;
-        let obs = Tensor::from_slice(&s.observations, (b, od), dev)?;
-        let actions = Tensor::from_slice(&s.actions, (b, ad), dev)?;
-        let rewards = Tensor::from_slice(&s.rewards, b, dev)?;
-        let next_obs = Tensor::from_slice(&s.next_observations, (b, od), dev)?;
-        let not_done = Tensor::from_slice(&s.dones, b, dev)?.affine(-1.0, 1.0)?;
+        let b = self.config.batch_size;
+        let Batch {
+            obs,
+            actions,
+            rewards,
+            next_obs,
+            not_done,
+        } = self.core.sample_batch()?;
         let alpha = self.ent_coef()? as f64;
         let gamma = self.config.gamma as f64;
+        let policy = &self.nets.policy;
 
         // Critic target from the next observations, with the current policy and α; no gradient.
-        let next_eps = self.noise(b)?;
-        let (next_actions, next_log_probs) = self
-            .nets
-            .policy
-            .actor
-            .distribution(&next_obs)?
-            .sample(&next_eps)?;
-        let next_q = (self
-            .nets
-            .policy
-            .critic_target
-            .min_q(&next_obs, &next_actions)?
-            - (next_log_probs * alpha)?)?;
+        let next_eps = self.core.noise(b)?;
+        let (next_actions, next_log_probs) =
+            policy.actor.distribution(&next_obs)?.sample(&next_eps)?;
+        let next_q =
+            (policy.critic_target.min_q(&next_obs, &next_actions)? - (next_log_probs * alpha)?)?;
         let target = (rewards + ((not_done * next_q)? * gamma)?)?.detach();
 
-        let (q1, q2) = self.nets.policy.critic.q(&obs, &actions)?;
+        let (q1, q2) = policy.critic.q(&obs, &actions)?;
         let critic_loss =
             (((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)? * 0.5)?;
         self.critic_opt.backward_step(&critic_loss, 0.0)?;
 
-        // Actor against the critics just updated (as CleanRL and SB3 do). The backward pass also
-        // reaches the critics' variables, but only the actor's optimiser steps.
-        let eps = self.noise(b)?;
-        let (pi_actions, log_probs) = self.nets.policy.actor.distribution(&obs)?.sample(&eps)?;
-        let q_pi = self.nets.policy.critic.min_q(&obs, &pi_actions)?;
+        // Actor against the critics just updated (as CleanRL and SB3 do), their weights held
+        // constant: only the actor's optimiser steps.
+        let eps = self.core.noise(b)?;
+        let (pi_actions, log_probs) = policy.actor.distribution(&obs)?.sample(&eps)?;
+        let q_pi = policy.critic.min_q_detached(&obs, &pi_actions)?;
         let actor_loss = ((&log_probs * alpha)? - q_pi)?.mean_all()?;
         self.actor_opt.backward_step(&actor_loss, 0.0)?;
 
@@ -383,61 +363,13 @@ impl Sac {
         }
 
         self.nets.policy.soft_update(self.config.tau)?;
-        self.n_updates += 1;
+        self.core.n_updates += 1;
         Ok(StepStats {
             actor_loss: actor_loss.to_scalar()?,
             critic_loss: critic_loss.to_scalar()?,
             ent_coef: alpha as f32,
             ent_coef_loss,
         })
-    }
-
-    /// Errors when `venv` is not the environment this learner was built for, or acts outside
-    /// the `[-1, 1]` box the tanh policy covers.
-    fn check_env<V: VectorEnv>(&self, venv: &V) -> Result<()> {
-        if venv.obs_dim() != self.obs_dim || venv.act_dim() != self.act_dim {
-            return Err(RlError::Other(format!(
-                "SAC was built for {} observation and {} action values, the environments have \
-                 {} and {}",
-                self.obs_dim,
-                self.act_dim,
-                venv.obs_dim(),
-                venv.act_dim()
-            )));
-        }
-        let space = venv.action_space();
-        if space.low.iter().any(|&l| l != -1.0) || space.high.iter().any(|&h| h != 1.0) {
-            return Err(RlError::Other(format!(
-                "SAC's actions lie in [-1, 1], the environments' action space is {:?} to {:?}; \
-                 wrap them in RescaleAction",
-                space.low, space.high
-            )));
-        }
-        Ok(())
-    }
-}
-
-/// The entries of `state` under `prefix`, without it.
-fn unprefixed(state: &TensorMap, prefix: &str) -> TensorMap {
-    state
-        .iter()
-        .filter_map(|(k, v)| Some((k.strip_prefix(prefix)?.to_string(), v.clone())))
-        .collect()
-}
-
-/// One number of the training state.
-fn state_scalar(state: &TensorMap, key: &str) -> Result<f64> {
-    let t = state
-        .get(key)
-        .ok_or_else(|| RlError::Model(format!("the training state lacks `{key}`")))?;
-    match t
-        .to_dtype(DType::F64)
-        .and_then(|t| t.flatten_all()?.to_vec1::<f64>())
-    {
-        Ok(v) if v.len() == 1 && v[0].is_finite() && v[0] >= 0.0 => Ok(v[0]),
-        _ => Err(RlError::Model(format!(
-            "`{key}` must hold one non-negative number"
-        ))),
     }
 }
 
@@ -447,11 +379,11 @@ impl Algorithm for Sac {
     }
 
     fn num_timesteps(&self) -> u64 {
-        self.num_timesteps
+        self.core.num_timesteps
     }
 
     fn set_num_timesteps(&mut self, steps: u64) {
-        self.num_timesteps = steps;
+        self.core.num_timesteps = steps;
     }
 
     fn learn_iteration<V: VectorEnv>(
@@ -460,67 +392,21 @@ impl Algorithm for Sac {
         _progress_remaining: f64,
         on_step: &mut dyn FnMut(&VecStep<'_>),
     ) -> Result<Vec<(&'static str, f32)>> {
-        self.check_env(venv)?;
-        let (n, od, ad) = (venv.num_envs(), self.obs_dim, self.act_dim);
-        let obs = venv.observations().to_vec();
-        let actions: Vec<f32> = if self.num_timesteps < self.config.learning_starts {
-            (0..n * ad)
-                .map(|_| self.rng.random_range(-1.0..=1.0))
-                .collect()
-        } else {
-            self.predict(&obs, false)?
-        };
-        let step = venv.step(&actions)?;
-        on_step(&step);
-        for i in 0..n {
-            // An ended episode's row already belongs to the next episode: store its real last
-            // observation, which a truncation bootstraps from.
-            let next_obs = step.terminal_observation(i).unwrap_or(step.obs(i));
-            self.buffer.push(
-                &obs[i * od..(i + 1) * od],
-                &actions[i * ad..(i + 1) * ad],
-                step.rewards[i],
-                next_obs,
-                step.terminated[i],
-            );
-        }
-        self.num_timesteps += n as u64;
-        if self.num_timesteps < self.config.learning_starts {
+        let actor = &self.nets.policy.actor;
+        let steps = self
+            .core
+            .collect(venv, on_step, |obs, rng| actor.predict(obs, false, rng))?;
+        if steps == 0 {
             return Ok(Vec::new());
         }
-
-        self.grad_accumulator += self.config.utd_ratio as f64 * n as f64;
-        let steps = self.grad_accumulator.floor();
-        self.grad_accumulator -= steps;
-        if steps < 1.0 {
-            return Ok(Vec::new());
-        }
-        let mut sum = StepStats::default();
-        for _ in 0..steps as u64 {
-            let s = self.gradient_step()?;
-            sum.actor_loss += s.actor_loss;
-            sum.critic_loss += s.critic_loss;
-            sum.ent_coef += s.ent_coef;
-            sum.ent_coef_loss += s.ent_coef_loss;
-        }
-        let k = steps as f32;
-        let mut stats = vec![
-            ("train/actor_loss", sum.actor_loss / k),
-            ("train/critic_loss", sum.critic_loss / k),
-            ("train/ent_coef", sum.ent_coef / k),
-        ];
-        if self.alpha_opt.is_some() {
-            stats.push(("train/ent_coef_loss", sum.ent_coef_loss / k));
-        }
-        stats.push(("train/learning_rate", self.config.learning_rate as f32));
-        Ok(stats)
+        self.train(steps)
     }
 
     fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
         self.nets
             .policy
             .actor
-            .predict(obs, deterministic, &mut self.rng)
+            .predict(obs, deterministic, &mut self.core.rng)
     }
 
     fn weights(&self) -> Result<TensorMap> {
@@ -528,12 +414,11 @@ impl Algorithm for Sac {
     }
 
     fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
-        self.nets
-            .load_weights(weights, self.obs_dim, self.act_dim, &self.config)
+        let (od, ad) = (self.core.obs_dim, self.core.act_dim);
+        self.nets.load_weights(weights, od, ad, &self.config)
     }
 
     fn training_state(&self) -> Result<TensorMap> {
-        let dev = &Device::Cpu;
         let mut state = TensorMap::new();
         let mut optimizers = vec![
             ("actor_opt.", &self.actor_opt),
@@ -549,18 +434,7 @@ impl Algorithm for Sac {
                     .map(|(k, v)| (format!("{prefix}{k}"), v)),
             );
         }
-        state.extend(rng_state(&self.rng, "sac.")?);
-        state.insert(
-            "sac.grad_accumulator".into(),
-            Tensor::new(&[self.grad_accumulator], dev)?,
-        );
-        state.insert(
-            "sac.n_updates".into(),
-            Tensor::new(&[self.n_updates as f64], dev)?,
-        );
-        if self.config.save_replay_buffer {
-            state.extend(self.buffer.state("sac.replay.")?);
-        }
+        state.extend(self.core.state()?);
         Ok(state)
     }
 
@@ -579,34 +453,22 @@ impl Algorithm for Sac {
             Some((varmap, _)) => Some(load_opt(varmap, "alpha_opt.")?),
             None => None,
         };
-        let rng = rng_from_state(state, "sac.")?;
-        let grad_accumulator = state_scalar(state, "sac.grad_accumulator")?;
-        let n_updates = state_scalar(state, "sac.n_updates")? as u64;
-        // A run that keeps its buffer in checkpoints needs it back; otherwise a state without
-        // one resumes with the buffer as it is (empty in a fresh learner, as in SB3).
-        if self.config.save_replay_buffer || state.contains_key("sac.replay.rewards") {
-            self.buffer
-                .load_state(state, "sac.replay.")
-                .map_err(RlError::Model)?;
-        }
+        self.core.read_state(state)?.apply(&mut self.core, state)?;
         self.actor_opt = actor_opt;
         self.critic_opt = critic_opt;
         self.alpha_opt = alpha_opt;
-        self.rng = rng;
-        self.grad_accumulator = grad_accumulator;
-        self.n_updates = n_updates;
         Ok(())
     }
 
     fn rng_mut(&mut self) -> &mut ChaCha8Rng {
-        &mut self.rng
+        &mut self.core.rng
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::standard_normal;
+    use candle_core::Tensor;
     use fairgrasp_env::tasks::classic::Pendulum;
     use fairgrasp_env::wrappers::RescaleAction;
     use fairgrasp_env::{Env, VecEnv};
@@ -647,7 +509,7 @@ mod tests {
     fn polyak_update_moves_targets_by_tau() {
         let sac = Sac::new(small_config(), 3, 1, 2, 0).unwrap();
         // Make the online critics differ from their targets.
-        for (online, _) in &sac.nets.policy.target_pairs {
+        for (online, _) in &sac.nets.policy.critic_pairs.0 {
             online
                 .set(&online.as_tensor().randn_like(0.0, 1.0).unwrap())
                 .unwrap();
@@ -751,7 +613,7 @@ mod tests {
         assert_eq!(sac.n_updates(), 0);
         assert_eq!(snapshot(&sac.weights().unwrap()), initial);
         // The random actions cover [-1, 1], unlike the initial policy (σ ≈ 0.22).
-        let stored = snapshot(&sac.buffer.state("").unwrap());
+        let stored = snapshot(&sac.core.buffer.state("").unwrap());
         let actions = &stored["actions"];
         assert_eq!(actions.len(), 38);
         assert!(actions.iter().all(|a| (-1.0..=1.0).contains(a)));
@@ -781,7 +643,7 @@ mod tests {
             assert_ne!(before, venv.observations());
         }
         let i = Pendulum::MAX_STEPS as usize - 1;
-        let stored = snapshot(&sac.buffer.state("").unwrap());
+        let stored = snapshot(&sac.core.buffer.state("").unwrap());
         assert_eq!(stored["next_observations"][3 * i..3 * i + 3], last);
         assert_ne!(venv.observations(), last.as_slice());
         assert!(stored["dones"].iter().all(|&d| d == 0.0));
@@ -794,7 +656,7 @@ mod tests {
         for _ in 0..46 {
             a.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap();
         }
-        assert!(a.n_updates() > 20 && a.grad_accumulator != 0.0);
+        assert!(a.n_updates() > 20 && a.core.grad_accumulator != 0.0);
         let weights = a.weights().unwrap();
         let state = a.training_state().unwrap();
 
@@ -997,36 +859,21 @@ mod tests {
         assert_eq!(Pendulum::new().action_space().high, [2.0]);
     }
 
-    /// Gradient steps per second at the grasping task's sizes and at the Pendulum test's (run
-    /// with `--ignored` in release; `RAYON_NUM_THREADS` sets candle's threads).
     #[test]
-    #[ignore]
-    fn gradient_step_throughput() {
-        for (obs_dim, act_dim, net_arch) in [(40, 5, vec![256, 256]), (3, 1, vec![64, 64])] {
-            let config = SacConfig {
-                net_arch: net_arch.clone(),
-                ..SacConfig::default()
-            };
-            let mut sac = Sac::new(config, obs_dim, act_dim, 1, 0).unwrap();
-            let mut rng = ChaCha8Rng::seed_from_u64(0);
-            for _ in 0..10_000 {
-                let obs: Vec<f32> = (0..obs_dim).map(|_| standard_normal(&mut rng)).collect();
-                let action: Vec<f32> = (0..act_dim).map(|_| rng.random_range(-1.0..1.0)).collect();
-                sac.buffer.push(&obs, &action, rng.random(), &obs, false);
-            }
-            for _ in 0..10 {
-                sac.gradient_step().unwrap();
-            }
-            let n = 200;
-            let start = std::time::Instant::now();
-            for _ in 0..n {
-                sac.gradient_step().unwrap();
-            }
-            let secs = start.elapsed().as_secs_f64();
-            eprintln!(
-                "batch 256, {net_arch:?} nets, {obs_dim} → {act_dim}: {:.1} gradient steps/s",
-                n as f64 / secs
-            );
+    fn train_takes_the_gradient_steps_asked_for() {
+        let mut sac = Sac::new(small_config(), 3, 1, 1, 0).unwrap();
+        let err = sac.train(1).unwrap_err().to_string();
+        assert!(err.contains("empty replay buffer"), "{err}");
+        for i in 0..50 {
+            let x = i as f32 / 50.0;
+            sac.replay_buffer_mut()
+                .push(&[x, -x, 0.5], &[x - 0.5], x, &[x, x, 0.0], i % 7 == 0);
         }
+        let before = snapshot(&sac.weights().unwrap());
+        let stats = sac.train(3).unwrap();
+        assert_eq!(sac.n_updates(), 3);
+        assert_eq!(stats[0].0, "train/actor_loss");
+        assert!(stats.iter().all(|s| s.1.is_finite()), "{stats:?}");
+        assert_ne!(snapshot(&sac.weights().unwrap()), before);
     }
 }

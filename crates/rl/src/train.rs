@@ -18,6 +18,7 @@ use crate::policies::Policy;
 use crate::ppo::{Ppo, PpoConfig};
 use crate::sac::{Sac, SacConfig};
 use crate::save_util::write_atomic;
+use crate::td3::{Td3, Td3Config};
 use fairgrasp_env::wrappers::{
     EpisodeStats, RescaleAction, VecNormalize, VecNormalizeConfig, VecNormalizeState,
 };
@@ -35,6 +36,7 @@ pub enum Algo {
     #[default]
     Ppo,
     Sac,
+    Td3,
 }
 
 impl Algo {
@@ -42,6 +44,7 @@ impl Algo {
         match self {
             Algo::Ppo => "ppo",
             Algo::Sac => "sac",
+            Algo::Td3 => "td3",
         }
     }
 }
@@ -103,6 +106,7 @@ pub struct TrainConfig {
     pub eval: EvalConfig,
     pub ppo: PpoConfig,
     pub sac: SacConfig,
+    pub td3: Td3Config,
     /// The environment's own settings (its TOML table; missing keys take their defaults).
     pub env: toml::Table,
 }
@@ -122,6 +126,7 @@ impl Default for TrainConfig {
             eval: EvalConfig::default(),
             ppo: PpoConfig::default(),
             sac: SacConfig::default(),
+            td3: Td3Config::default(),
             env: toml::Table::new(),
         }
     }
@@ -169,6 +174,7 @@ impl TrainConfig {
         match self.algo {
             Algo::Ppo => crate::ppo::validate(&self.ppo, self.n_envs)?,
             Algo::Sac => crate::sac::validate(&self.sac, self.n_envs)?,
+            Algo::Td3 => crate::td3::validate(&self.td3, self.n_envs)?,
         }
         if self.eval.freq > 0 && self.eval.episodes == 0 {
             return bad("eval.episodes", "must be at least 1 when evaluating");
@@ -389,6 +395,16 @@ fn dispatch(
             )?;
             run(config, run_dir, sac, venv, checkpoint, on_progress)
         }
+        Algo::Td3 => {
+            let td3 = Td3::new(
+                config.td3.clone(),
+                obs_dim,
+                act_dim,
+                config.n_envs,
+                config.seed,
+            )?;
+            run(config, run_dir, td3, venv, checkpoint, on_progress)
+        }
     }
 }
 
@@ -450,6 +466,7 @@ fn run<A: Algorithm>(
         act_dim,
         ppo: (config.algo == Algo::Ppo).then(|| config.ppo.clone()),
         sac: (config.algo == Algo::Sac).then(|| config.sac.clone()),
+        td3: (config.algo == Algo::Td3).then(|| config.td3.clone()),
         env_id: config.env_id.clone(),
         env: env_json.clone(),
         normalization: config.normalize.norm_obs.then(|| venv.state().to_json()),
@@ -468,7 +485,7 @@ fn run<A: Algorithm>(
     // Off-policy learners iterate once per vector step: log those every 1,000 steps.
     let log_every = match config.algo {
         Algo::Ppo => 0,
-        Algo::Sac => 1000,
+        Algo::Sac | Algo::Td3 => 1000,
     };
     let mut last_log = algo.num_timesteps();
     while algo.num_timesteps() < config.total_timesteps {

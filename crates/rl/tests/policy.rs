@@ -9,6 +9,7 @@ use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, load_tensors, save_model};
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use fairgrasp_rl::sac::{Sac, SacConfig};
+use fairgrasp_rl::td3::{Td3, Td3Config};
 use std::path::Path;
 
 /// `model.json` for a learner trained on a classic task with observation normalisation.
@@ -26,6 +27,7 @@ fn meta<V: VectorEnv>(
         act_dim: venv.act_dim(),
         ppo,
         sac,
+        td3: None,
         env_id: env_id.into(),
         env: serde_json::json!({ "max_steps": 50 }),
         normalization: Some(venv.state().to_json()),
@@ -167,6 +169,51 @@ fn a_loaded_sac_policy_acts_exactly_as_its_learner() {
     let sample = policy.act(obs, false).unwrap();
     assert!(sample.iter().all(|a| (-1.0..=1.0).contains(a)));
     assert_ne!(sample, policy.act(obs, true).unwrap());
+}
+
+#[test]
+fn a_loaded_td3_policy_acts_exactly_as_its_learner() {
+    let n_envs = 2;
+    let envs = (0..n_envs)
+        .map(|_| RescaleAction::new(Pendulum::new()).unwrap())
+        .collect();
+    let mut venv =
+        VecNormalize::new(VecEnv::new(envs, 1).unwrap(), VecNormalizeConfig::default()).unwrap();
+    venv.reset(Some(1)).unwrap();
+    let config = Td3Config {
+        buffer_size: 1_000,
+        learning_starts: 64,
+        batch_size: 32,
+        net_arch: vec![16, 16],
+        ..Td3Config::default()
+    };
+    let mut td3 = Td3::new(config.clone(), 3, 1, n_envs, 3).unwrap();
+    for _ in 0..64 {
+        td3.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap();
+    }
+    assert!(td3.n_updates() > 1);
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("model");
+    let mut meta = meta(None, None, &venv, "Pendulum-v1", td3.num_timesteps());
+    meta.algo = "td3".into();
+    meta.td3 = Some(config);
+    save_model(&model, &td3.weights().unwrap(), &meta).unwrap();
+
+    let env = RescaleAction::new(Pendulum::new()).unwrap();
+    let observations = raw_observations(env, &venv);
+    assert_policy_matches(&model, &mut td3, &venv, &observations);
+
+    // Deterministic actions repeat; exploration noise moves them, within [-1, 1].
+    let mut policy = Policy::load(&model).unwrap();
+    let obs = &observations[0];
+    let mode = policy.act(obs, true).unwrap();
+    assert_eq!(mode, policy.act(obs, true).unwrap());
+    let sample = policy.act(obs, false).unwrap();
+    assert!(sample.iter().all(|a| (-1.0..=1.0).contains(a)));
+    assert_ne!(sample, mode);
+    // Only the acting network is exported.
+    let names: Vec<String> = policy.actor_tensors().into_keys().collect();
+    assert!(names.iter().all(|n| n.starts_with("actor.")), "{names:?}");
 }
 
 #[test]

@@ -6,6 +6,7 @@ use crate::error::{Result, RlError};
 use crate::model::{ModelMeta, load_tensors, resolve_model_dir};
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::sac_policy::SacActor;
+use crate::policies::td3_policy::Td3Actor;
 use crate::sac::Networks as SacNetworks;
 use fairgrasp_env::wrappers::VecNormalizeState;
 use rand::SeedableRng;
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 enum Actor {
     Ppo(ActorCritic),
     Sac(SacActor),
+    Td3(Td3Actor),
 }
 
 /// A trained policy: the model's networks and observation statistics. It gives exactly the
@@ -75,9 +77,15 @@ impl Policy {
                     .map_err(weights_error)?;
                 Actor::Sac(nets.into_actor())
             }
+            "td3" => {
+                let config = meta.td3.as_ref().ok_or_else(|| missing("td3"))?;
+                let actor = crate::td3::load_actor(weights, meta.obs_dim, meta.act_dim, config)
+                    .map_err(weights_error)?;
+                Actor::Td3(actor)
+            }
             other => {
                 return Err(RlError::Model(format!(
-                    "model.json: unknown algorithm `{other}` (expected ppo or sac)"
+                    "model.json: unknown algorithm `{other}` (expected ppo, sac or td3)"
                 )));
             }
         };
@@ -158,6 +166,7 @@ impl Policy {
         match &self.actor {
             Actor::Ppo(policy) => policy.predict(input, deterministic, &mut self.rng),
             Actor::Sac(actor) => actor.predict(input, deterministic, &mut self.rng),
+            Actor::Td3(actor) => actor.predict(input, deterministic, &mut self.rng),
         }
     }
 
@@ -179,6 +188,7 @@ impl Policy {
         match &self.actor {
             Actor::Ppo(policy) => varmap_tensors(&policy.varmap, ""),
             Actor::Sac(actor) => varmap_tensors(&actor.varmap, ""),
+            Actor::Td3(actor) => varmap_tensors(&actor.varmap, ""),
         }
     }
 

@@ -1,0 +1,161 @@
+//! TD3's networks (SB3's `TD3Policy`): a deterministic tanh actor, twin critics
+//! ([`TwinCritics`]), and Polyak-averaged targets of both.
+//!
+//! Parameters: `actor.*`, `actor_target.*`, `critic.qf1.*`, `critic.qf2.*`, `critic_target.*`.
+
+use crate::error::Result;
+use crate::nn::Mlp;
+use crate::policies::actor_critic::obs_tensor;
+use crate::policies::critics::{TargetPairs, TwinCritics};
+use crate::policies::features::FeaturesExtractor;
+use crate::td3::Td3Config;
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use rand::Rng;
+
+/// Output-layer gain of the actor (see [`Mlp::new`]): small, so the first actions are near zero
+/// and the exploration noise decides them, as with SAC's actor.
+const ACTOR_OUTPUT_GAIN: f64 = 0.01;
+
+/// The deterministic policy `a = tanh(MLP(features(s)))`.
+pub struct Td3Actor {
+    pub varmap: VarMap,
+    features: Box<dyn FeaturesExtractor>,
+    net: Mlp,
+    obs_dim: usize,
+    act_dim: usize,
+    /// σ of the Gaussian exploration noise of stochastic actions.
+    action_noise: f32,
+}
+
+impl Td3Actor {
+    /// The actor with zero weights, parameters named `{prefix}.…`.
+    fn zeroed(prefix: &str, obs_dim: usize, act_dim: usize, config: &Td3Config) -> Result<Self> {
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp(prefix);
+        let features = config.features.build(&vb.pp("features"), obs_dim)?;
+        let net = Mlp::new(
+            &vb,
+            features.features_dim(),
+            &config.net_arch,
+            act_dim,
+            config.activation,
+            ACTOR_OUTPUT_GAIN,
+        )?;
+        Ok(Self {
+            varmap,
+            features,
+            net,
+            obs_dim,
+            act_dim,
+            action_noise: config.action_noise,
+        })
+    }
+
+    fn init_weights(&self, rng: &mut impl Rng) -> Result<()> {
+        self.features.init_weights(&self.varmap, rng)?;
+        self.net.init_weights(&self.varmap, rng)?;
+        Ok(())
+    }
+
+    /// Actions in `[-1, 1]` for a batch of observations (`batch × obs_dim`).
+    pub fn forward(&self, obs: &Tensor) -> Result<Tensor> {
+        Ok(self.net.forward(&self.features.forward(obs)?)?.tanh()?)
+    }
+
+    /// Actions for a batch of observations (row-major): the policy's when `deterministic`,
+    /// else with N(0, `action_noise`²) noise from `rng` added and clipped to `[-1, 1]` (TD3's
+    /// exploration). TD3's `predict`, its evaluation and [`crate::policies::Policy`] act
+    /// through this.
+    pub fn predict(
+        &self,
+        obs: &[f32],
+        deterministic: bool,
+        rng: &mut impl Rng,
+    ) -> Result<Vec<f32>> {
+        let obs = obs_tensor(obs, self.obs_dim, &Device::Cpu)?;
+        let mut actions: Vec<f32> = self.forward(&obs)?.flatten_all()?.to_vec1()?;
+        if !deterministic {
+            for a in &mut actions {
+                let noise = self.action_noise * crate::nn::standard_normal(rng);
+                *a = (*a + noise).clamp(-1.0, 1.0);
+            }
+        }
+        Ok(actions)
+    }
+
+    pub fn act_dim(&self) -> usize {
+        self.act_dim
+    }
+}
+
+/// The actor, the critics and the targets of both.
+pub struct Td3Policy {
+    pub actor: Td3Actor,
+    pub actor_target: Td3Actor,
+    pub critic: TwinCritics,
+    pub critic_target: TwinCritics,
+    pub(crate) actor_pairs: TargetPairs,
+    pub(crate) critic_pairs: TargetPairs,
+}
+
+impl Td3Policy {
+    /// The networks with zero weights (see [`Self::init_weights`]).
+    pub fn zeroed(obs_dim: usize, act_dim: usize, config: &Td3Config) -> Result<Self> {
+        let actor = Td3Actor::zeroed("actor", obs_dim, act_dim, config)?;
+        let actor_target = Td3Actor::zeroed("actor_target", obs_dim, act_dim, config)?;
+        let critics = |prefix: &str| {
+            TwinCritics::zeroed(
+                prefix,
+                obs_dim,
+                act_dim,
+                &config.net_arch,
+                config.activation,
+                &config.features,
+            )
+        };
+        let (critic, critic_target) = (critics("critic")?, critics("critic_target")?);
+        Ok(Self {
+            actor_pairs: TargetPairs::new(
+                &actor.varmap,
+                "actor.",
+                &actor_target.varmap,
+                "actor_target.",
+            )?,
+            critic_pairs: TargetPairs::new(
+                &critic.varmap,
+                "critic.",
+                &critic_target.varmap,
+                "critic_target.",
+            )?,
+            actor,
+            actor_target,
+            critic,
+            critic_target,
+        })
+    }
+
+    /// The groups of variables with their name prefixes, in a fixed order.
+    pub fn groups(&self) -> [(&'static str, &VarMap); 4] {
+        [
+            ("actor.", &self.actor.varmap),
+            ("actor_target.", &self.actor_target.varmap),
+            ("critic.", &self.critic.varmap),
+            ("critic_target.", &self.critic_target.varmap),
+        ]
+    }
+
+    /// Draws the actor's and critics' weights from `rng` and copies them to the targets.
+    pub fn init_weights(&self, rng: &mut impl Rng) -> Result<()> {
+        self.actor.init_weights(rng)?;
+        self.critic.init_weights(rng)?;
+        self.actor_pairs.copy()?;
+        self.critic_pairs.copy()
+    }
+
+    /// Polyak averaging of both targets: `target ← (1 − τ) target + τ online`.
+    pub fn soft_update(&self, tau: f32) -> Result<()> {
+        self.actor_pairs.soft_update(tau)?;
+        self.critic_pairs.soft_update(tau)
+    }
+}

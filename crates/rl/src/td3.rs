@@ -1,0 +1,755 @@
+//! Twin Delayed DDPG (Fujimoto et al. 2018), read top to bottom like CleanRL's
+//! `td3_continuous_action.py`, with SB3's TD3 names and semantics.
+//!
+//! Per iteration ([`crate::off_policy`], shared with SAC): one step of every environment
+//! (uniformly random actions for the first `learning_starts` steps, then the policy's with
+//! N(0, `action_noise`²) added), its transitions into the replay buffer, then on average
+//! `utd_ratio` gradient steps per transition. A gradient step, on a minibatch `(s, a, r, s', d)`:
+//! - target policy smoothing: `a' = clip(μ'(s') + clip(ε, −c, c), −1, 1)`,
+//!   `ε ~ N(0, target_policy_noise²)`, `c = target_noise_clip`;
+//! - critics: `y = r + γ (1 − d) min Q'(s', a')`, minimise `Σᵢ mean (Qᵢ(s, a) − y)²`;
+//! - every `policy_delay`-th step only: actor minimises `−mean Q₁(s, μ(s))`, then both targets
+//!   move: `θ' ← (1 − τ) θ' + τ θ`.
+//!
+//! `d` is termination only: a truncated episode is bootstrapped from its real last observation.
+
+use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
+use crate::error::{Result, RlError};
+use crate::nn::{Activation, Adam};
+use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, unprefixed};
+use crate::policies::features::FeaturesConfig;
+use crate::policies::td3_policy::{Td3Actor, Td3Policy};
+use candle_core::Tensor;
+use candle_nn::VarMap;
+use fairgrasp_env::{VecStep, VectorEnv};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// TD3 hyperparameters (SB3's names; the paper's noise settings).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Td3Config {
+    pub learning_rate: f64,
+    /// Replay buffer capacity (transitions).
+    pub buffer_size: usize,
+    /// Environment steps (all envs together) of uniformly random actions before learning.
+    pub learning_starts: u64,
+    pub batch_size: usize,
+    /// Polyak coefficient of the targets.
+    pub tau: f32,
+    pub gamma: f32,
+    /// Gradient steps per environment transition (update-to-data ratio).
+    pub utd_ratio: f32,
+    /// The actor and the targets learn every this many critic steps.
+    pub policy_delay: u32,
+    /// σ of the noise added to the target policy's actions (target policy smoothing).
+    pub target_policy_noise: f32,
+    /// That noise is clipped to ± this.
+    pub target_noise_clip: f32,
+    /// σ of the Gaussian exploration noise added to the actions while collecting.
+    pub action_noise: f32,
+    /// Hidden layers of the actor and of each critic.
+    pub net_arch: Vec<usize>,
+    pub activation: Activation,
+    /// Save the replay buffer in checkpoints, so a resumed run keeps its experience.
+    pub save_replay_buffer: bool,
+    /// What the actor and the critics read (`kind = "flatten"`: the observation itself).
+    pub features: FeaturesConfig,
+}
+
+impl Default for Td3Config {
+    fn default() -> Self {
+        Self {
+            learning_rate: 1e-3,
+            buffer_size: 1_000_000,
+            learning_starts: 10_000,
+            batch_size: 256,
+            tau: 0.005,
+            gamma: 0.99,
+            utd_ratio: 1.0,
+            policy_delay: 2,
+            target_policy_noise: 0.2,
+            target_noise_clip: 0.5,
+            action_noise: 0.1,
+            net_arch: vec![256, 256],
+            activation: Activation::Relu,
+            save_replay_buffer: true,
+            features: FeaturesConfig::Flatten {},
+        }
+    }
+}
+
+pub(crate) fn validate(c: &Td3Config, _n_envs: usize) -> Result<()> {
+    let bad = |key: &str, problem: String| {
+        Err(RlError::Config {
+            key: format!("td3.{key}"),
+            problem,
+        })
+    };
+    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
+        return bad(
+            "learning_rate",
+            format!("must be positive, got {}", c.learning_rate),
+        );
+    }
+    if c.buffer_size == 0 {
+        return bad("buffer_size", "must be at least 1".into());
+    }
+    if c.batch_size == 0 {
+        return bad("batch_size", "must be at least 1".into());
+    }
+    if !(c.tau > 0.0 && c.tau <= 1.0) {
+        return bad("tau", format!("must be in (0, 1], got {}", c.tau));
+    }
+    if !(0.0..=1.0).contains(&c.gamma) {
+        return bad("gamma", format!("must be in [0, 1], got {}", c.gamma));
+    }
+    if !(c.utd_ratio.is_finite() && c.utd_ratio > 0.0) {
+        return bad(
+            "utd_ratio",
+            format!("must be positive, got {}", c.utd_ratio),
+        );
+    }
+    if c.policy_delay == 0 {
+        return bad("policy_delay", "must be at least 1".into());
+    }
+    for (key, v) in [
+        ("target_policy_noise", c.target_policy_noise),
+        ("target_noise_clip", c.target_noise_clip),
+        ("action_noise", c.action_noise),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(key, format!("must be non-negative, got {v}"));
+        }
+    }
+    if c.net_arch.is_empty() || c.net_arch.contains(&0) {
+        return bad(
+            "net_arch",
+            "needs at least one hidden layer, all of positive width".into(),
+        );
+    }
+    Ok(())
+}
+
+/// Weights of a TD3 model without a learner (for [`crate::policies::Policy`]): builds the
+/// networks, loads `weights` (errors name the tensor at fault) and returns the actor.
+pub(crate) fn load_actor(
+    weights: &TensorMap,
+    obs_dim: usize,
+    act_dim: usize,
+    config: &Td3Config,
+) -> Result<Td3Actor> {
+    let policy = Td3Policy::zeroed(obs_dim, act_dim, config)?;
+    let scratch = Td3Policy::zeroed(obs_dim, act_dim, config)?;
+    load_grouped(&policy.groups(), &scratch.groups(), weights)?;
+    Ok(policy.actor)
+}
+
+/// The TD3 learner: networks and optimisers on the shared off-policy core (replay buffer,
+/// random stream, learn loop).
+pub struct Td3 {
+    pub config: Td3Config,
+    policy: Td3Policy,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    core: OffPolicyCore,
+}
+
+impl Td3 {
+    pub fn new(
+        config: Td3Config,
+        obs_dim: usize,
+        act_dim: usize,
+        n_envs: usize,
+        seed: u64,
+    ) -> Result<Self> {
+        validate(&config, n_envs)?;
+        let settings = LoopSettings {
+            buffer_size: config.buffer_size,
+            learning_starts: config.learning_starts,
+            batch_size: config.batch_size,
+            utd_ratio: config.utd_ratio,
+            save_replay_buffer: config.save_replay_buffer,
+        };
+        let mut core = OffPolicyCore::new("td3", settings, obs_dim, act_dim, seed)?;
+        let policy = Td3Policy::zeroed(obs_dim, act_dim, &config)?;
+        policy.init_weights(&mut core.rng)?;
+        let lr = config.learning_rate;
+        Ok(Self {
+            actor_opt: Adam::new(&policy.actor.varmap, lr)?,
+            critic_opt: Adam::new(&policy.critic.varmap, lr)?,
+            policy,
+            core,
+            config,
+        })
+    }
+
+    /// Gradient steps (critic updates) taken so far.
+    pub fn n_updates(&self) -> u64 {
+        self.core.n_updates
+    }
+
+    /// Transitions in the replay buffer.
+    pub fn replay_len(&self) -> usize {
+        self.core.buffer.len()
+    }
+
+    /// `gradient_steps` gradient steps on minibatches from the replay buffer (SB3's
+    /// `TD3.train`); returns the `train/*` means to log (`actor_loss` over the steps that
+    /// updated the actor, if any did).
+    pub fn train(&mut self, gradient_steps: u64) -> Result<Vec<(&'static str, f32)>> {
+        let (mut critic_sum, mut actor_sum, mut actor_steps) = (0.0, 0.0, 0u32);
+        for _ in 0..gradient_steps {
+            let (critic_loss, actor_loss) = self.gradient_step()?;
+            critic_sum += critic_loss;
+            if let Some(loss) = actor_loss {
+                actor_sum += loss;
+                actor_steps += 1;
+            }
+        }
+        let mut stats = Vec::new();
+        if actor_steps > 0 {
+            stats.push(("train/actor_loss", actor_sum / actor_steps as f32));
+        }
+        stats.push((
+            "train/critic_loss",
+            critic_sum / gradient_steps.max(1) as f32,
+        ));
+        stats.push(("train/learning_rate", self.config.learning_rate as f32));
+        Ok(stats)
+    }
+
+    /// Target policy smoothing: `clip(μ'(s') + clip(σ ε, −c, c), −1, 1)` for standard normal
+    /// `eps`.
+    fn smoothed_target_actions(&self, next_obs: &Tensor, eps: &Tensor) -> Result<Tensor> {
+        let c = self.config.target_noise_clip as f64;
+        let noise = (eps * self.config.target_policy_noise as f64)?.clamp(-c, c)?;
+        let actions = self.policy.actor_target.forward(next_obs)?;
+        Ok((actions + noise)?.clamp(-1.0, 1.0)?)
+    }
+
+    /// One critic step, and every `policy_delay`-th step an actor step and the target updates.
+    /// Returns the critic loss and the actor loss (when the actor learnt).
+    fn gradient_step(&mut self) -> Result<(f32, Option<f32>)> {
+        let b = self.config.batch_size;
+        let Batch {
+            obs,
+            actions,
+            rewards,
+            next_obs,
+            not_done,
+        } = self.core.sample_batch()?;
+
+        let eps = self.core.noise(b)?;
+        let next_actions = self.smoothed_target_actions(&next_obs, &eps)?;
+        let policy = &self.policy;
+        let next_q = policy.critic_target.min_q(&next_obs, &next_actions)?;
+        let target = (rewards + ((not_done * next_q)? * self.config.gamma as f64)?)?.detach();
+
+        let (q1, q2) = policy.critic.q(&obs, &actions)?;
+        let critic_loss =
+            ((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)?;
+        self.critic_opt.backward_step(&critic_loss, 0.0)?;
+        self.core.n_updates += 1;
+
+        let mut actor_loss = None;
+        if self
+            .core
+            .n_updates
+            .is_multiple_of(self.config.policy_delay as u64)
+        {
+            // Deterministic policy gradient through the first critic, its weights constant.
+            let loss = policy
+                .critic
+                .q1_detached(&obs, &policy.actor.forward(&obs)?)?
+                .mean_all()?
+                .neg()?;
+            self.actor_opt.backward_step(&loss, 0.0)?;
+            policy.soft_update(self.config.tau)?;
+            actor_loss = Some(loss.to_scalar::<f32>()?);
+        }
+        Ok((critic_loss.to_scalar()?, actor_loss))
+    }
+}
+
+impl Algorithm for Td3 {
+    fn name(&self) -> &'static str {
+        "td3"
+    }
+
+    fn num_timesteps(&self) -> u64 {
+        self.core.num_timesteps
+    }
+
+    fn set_num_timesteps(&mut self, steps: u64) {
+        self.core.num_timesteps = steps;
+    }
+
+    fn learn_iteration<V: VectorEnv>(
+        &mut self,
+        venv: &mut V,
+        _progress_remaining: f64,
+        on_step: &mut dyn FnMut(&VecStep<'_>),
+    ) -> Result<Vec<(&'static str, f32)>> {
+        let actor = &self.policy.actor;
+        let steps = self
+            .core
+            .collect(venv, on_step, |obs, rng| actor.predict(obs, false, rng))?;
+        if steps == 0 {
+            return Ok(Vec::new());
+        }
+        self.train(steps)
+    }
+
+    fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        self.policy
+            .actor
+            .predict(obs, deterministic, &mut self.core.rng)
+    }
+
+    fn weights(&self) -> Result<TensorMap> {
+        let mut out = TensorMap::new();
+        for (_, varmap) in self.policy.groups() {
+            out.extend(varmap_tensors(varmap, ""));
+        }
+        Ok(out)
+    }
+
+    fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
+        let scratch = Td3Policy::zeroed(self.core.obs_dim, self.core.act_dim, &self.config)?;
+        load_grouped(&self.policy.groups(), &scratch.groups(), weights)
+    }
+
+    fn training_state(&self) -> Result<TensorMap> {
+        let mut state = TensorMap::new();
+        for (prefix, opt) in [
+            ("actor_opt.", &self.actor_opt),
+            ("critic_opt.", &self.critic_opt),
+        ] {
+            state.extend(
+                opt.state()?
+                    .into_iter()
+                    .map(|(k, v)| (format!("{prefix}{k}"), v)),
+            );
+        }
+        state.extend(self.core.state()?);
+        Ok(state)
+    }
+
+    fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
+        // Everything is read into new values first, so a bad state changes nothing.
+        let lr = self.config.learning_rate;
+        let load_opt = |varmap: &VarMap, prefix: &str| -> Result<Adam> {
+            let mut opt = Adam::new(varmap, lr)?;
+            opt.load_state(&unprefixed(state, prefix))
+                .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
+            Ok(opt)
+        };
+        let actor_opt = load_opt(&self.policy.actor.varmap, "actor_opt.")?;
+        let critic_opt = load_opt(&self.policy.critic.varmap, "critic_opt.")?;
+        self.core.read_state(state)?.apply(&mut self.core, state)?;
+        self.actor_opt = actor_opt;
+        self.critic_opt = critic_opt;
+        Ok(())
+    }
+
+    fn rng_mut(&mut self) -> &mut ChaCha8Rng {
+        &mut self.core.rng
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{DType, Device};
+    use fairgrasp_env::VecEnv;
+    use fairgrasp_env::tasks::classic::Pendulum;
+    use fairgrasp_env::wrappers::RescaleAction;
+    use std::collections::HashMap;
+
+    fn small_config() -> Td3Config {
+        Td3Config {
+            buffer_size: 1_000,
+            learning_starts: 40,
+            batch_size: 16,
+            net_arch: vec![16, 16],
+            // Fractional steps per iteration with two envs, so the accumulator matters.
+            utd_ratio: 0.75,
+            ..Td3Config::default()
+        }
+    }
+
+    fn pendulums(n: usize, seed: u64) -> VecEnv<RescaleAction<Pendulum>> {
+        let envs = (0..n)
+            .map(|_| RescaleAction::new(Pendulum::new()).unwrap())
+            .collect();
+        let mut venv = VecEnv::new(envs, 1).unwrap();
+        venv.reset(Some(seed)).unwrap();
+        venv
+    }
+
+    /// Deep copies of the tensors of a map, by name.
+    fn snapshot(map: &TensorMap) -> HashMap<String, Vec<f32>> {
+        map.iter()
+            .map(|(k, t)| {
+                let values = t.flatten_all().unwrap().to_dtype(DType::F32).unwrap();
+                (k.clone(), values.to_vec1().unwrap())
+            })
+            .collect()
+    }
+
+    /// The tensors of `snap` whose names start with `prefix`.
+    fn group(snap: &HashMap<String, Vec<f32>>, prefix: &str) -> Vec<(String, Vec<f32>)> {
+        let mut out: Vec<_> = snap
+            .iter()
+            .filter(|(k, _)| k.starts_with(prefix))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        out.sort_by(|a, b| a.0.cmp(&b.0));
+        assert!(!out.is_empty(), "no tensors under {prefix}");
+        out
+    }
+
+    /// A learner with 60 transitions in its buffer and no gradient step taken.
+    fn filled(config: Td3Config, seed: u64) -> Td3 {
+        let mut td3 = Td3::new(config, 3, 1, 2, seed).unwrap();
+        for i in 0..60 {
+            let x = i as f32 / 60.0;
+            td3.core
+                .buffer
+                .push(&[x, -x, 0.5], &[x - 0.5], x, &[x, x, 0.0], i % 7 == 0);
+        }
+        td3
+    }
+
+    #[test]
+    fn a_seed_fixes_the_initial_networks_and_targets_start_as_copies() {
+        let a = snapshot(
+            &Td3::new(small_config(), 3, 1, 2, 5)
+                .unwrap()
+                .weights()
+                .unwrap(),
+        );
+        let b = snapshot(
+            &Td3::new(small_config(), 3, 1, 2, 5)
+                .unwrap()
+                .weights()
+                .unwrap(),
+        );
+        let c = snapshot(
+            &Td3::new(small_config(), 3, 1, 2, 6)
+                .unwrap()
+                .weights()
+                .unwrap(),
+        );
+        assert_eq!(a, b);
+        assert_ne!(a["actor.l0.weight"], c["actor.l0.weight"]);
+        assert_eq!(a["actor.l2.weight"], a["actor_target.l2.weight"]);
+        assert_eq!(a["critic.qf2.l1.weight"], a["critic_target.qf2.l1.weight"]);
+        assert_eq!(a.len(), 6 + 6 + 12 + 12);
+    }
+
+    #[test]
+    fn the_actor_and_the_targets_learn_every_policy_delay_critic_steps() {
+        let mut td3 = filled(small_config(), 1);
+        let w0 = snapshot(&td3.weights().unwrap());
+        // Step 1: only the critics move; no actor loss is logged.
+        let stats = td3.train(1).unwrap();
+        let names: Vec<&str> = stats.iter().map(|s| s.0).collect();
+        assert_eq!(names, ["train/critic_loss", "train/learning_rate"]);
+        let w1 = snapshot(&td3.weights().unwrap());
+        assert_ne!(group(&w1, "critic."), group(&w0, "critic."));
+        for prefix in ["actor.", "actor_target.", "critic_target."] {
+            assert_eq!(group(&w1, prefix), group(&w0, prefix), "{prefix} moved");
+        }
+        // Step 2: the actor learns and both targets move towards their networks.
+        let stats = td3.train(1).unwrap();
+        assert_eq!(stats[0].0, "train/actor_loss");
+        let w2 = snapshot(&td3.weights().unwrap());
+        for prefix in ["actor.", "actor_target.", "critic.", "critic_target."] {
+            assert_ne!(
+                group(&w2, prefix),
+                group(&w1, prefix),
+                "{prefix} did not move"
+            );
+        }
+        let tau = td3.config.tau;
+        for ((name, t2), (_, t1)) in group(&w2, "actor_target.")
+            .iter()
+            .zip(group(&w1, "actor_target."))
+        {
+            let online = &w2[&name.replacen("actor_target.", "actor.", 1)];
+            for k in 0..t2.len() {
+                let want = (1.0 - tau) * t1[k] + tau * online[k];
+                assert!(
+                    (t2[k] - want).abs() <= 1e-6 * (1.0 + want.abs()),
+                    "{name}[{k}]"
+                );
+            }
+        }
+        assert_eq!(td3.n_updates(), 2);
+
+        // With policy_delay 3: two critic-only steps, then the actor.
+        let mut td3 = filled(
+            Td3Config {
+                policy_delay: 3,
+                ..small_config()
+            },
+            1,
+        );
+        let w0 = snapshot(&td3.weights().unwrap());
+        td3.train(2).unwrap();
+        assert_eq!(
+            group(&snapshot(&td3.weights().unwrap()), "actor."),
+            group(&w0, "actor.")
+        );
+        td3.train(1).unwrap();
+        assert_ne!(
+            group(&snapshot(&td3.weights().unwrap()), "actor."),
+            group(&w0, "actor.")
+        );
+    }
+
+    #[test]
+    fn target_policy_smoothing_clips_the_noise_then_the_action() {
+        let config = Td3Config {
+            target_policy_noise: 0.2,
+            target_noise_clip: 0.5,
+            ..small_config()
+        };
+        let td3 = Td3::new(config, 3, 1, 1, 0).unwrap();
+        let dev = &Device::Cpu;
+        let next_obs = Tensor::new(
+            &[[0.1f32, 0.2, 0.3], [-0.5, 0.4, 1.0], [0.0, 0.0, 0.0]],
+            dev,
+        )
+        .unwrap();
+        let mu: Vec<f32> = td3
+            .policy
+            .actor_target
+            .forward(&next_obs)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let smoothed = |eps: [f32; 3]| -> Vec<f32> {
+            let eps = Tensor::new(&eps, dev).unwrap().reshape((3, 1)).unwrap();
+            td3.smoothed_target_actions(&next_obs, &eps)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap()
+        };
+        // σ ε within the clip: added as is.
+        let small = smoothed([1.0, -1.0, 0.0]);
+        for (k, want) in [mu[0] + 0.2, mu[1] - 0.2, mu[2]].iter().enumerate() {
+            assert!((small[k] - want).abs() < 1e-6, "{small:?} vs {mu:?}");
+        }
+        // 0.2 × 10 = 2 is clipped to 0.5, then the action to [-1, 1] (μ' is near 0 at first).
+        let large = smoothed([10.0, -10.0, 1e6]);
+        for (k, want) in [mu[0] + 0.5, mu[1] - 0.5, mu[2] + 0.5].iter().enumerate() {
+            assert!(
+                (large[k] - want.clamp(-1.0, 1.0)).abs() < 1e-6,
+                "{large:?} vs {mu:?}"
+            );
+        }
+        let mut wide = Td3::new(
+            Td3Config {
+                target_noise_clip: 5.0,
+                ..small_config()
+            },
+            3,
+            1,
+            1,
+            0,
+        )
+        .unwrap();
+        wide.config.target_policy_noise = 1.0;
+        let eps = Tensor::new(&[[3.0f32], [-3.0], [0.0]], dev).unwrap();
+        let clipped: Vec<f32> = wide
+            .smoothed_target_actions(&next_obs, &eps)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        assert_eq!(&clipped[..2], &[1.0, -1.0]);
+    }
+
+    #[test]
+    fn exploration_adds_clipped_gaussian_noise_and_deterministic_actions_do_not() {
+        let mut td3 = Td3::new(small_config(), 3, 1, 1, 0).unwrap();
+        let obs = [0.3f32, -0.2, 0.5];
+        let mean = td3.predict(&obs, true).unwrap();
+        assert_eq!(mean, td3.predict(&obs, true).unwrap());
+        let noisy: Vec<f32> = (0..2000)
+            .map(|_| td3.predict(&obs, false).unwrap()[0] - mean[0])
+            .collect();
+        let m = noisy.iter().sum::<f32>() / noisy.len() as f32;
+        let sd = (noisy.iter().map(|x| (x - m).powi(2)).sum::<f32>() / noisy.len() as f32).sqrt();
+        assert!(
+            m.abs() < 0.01 && (sd - 0.1).abs() < 0.01,
+            "mean {m}, sd {sd}"
+        );
+    }
+
+    #[test]
+    fn training_state_round_trip_continues_bit_exactly() {
+        let mut a = Td3::new(small_config(), 3, 1, 2, 1).unwrap();
+        let mut venv = pendulums(2, 1);
+        // 25 learning iterations of 1.5 steps: 37 critic steps and half a step owed.
+        for _ in 0..44 {
+            a.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap();
+        }
+        assert!(a.n_updates() > 20 && a.core.grad_accumulator != 0.0);
+        // An odd number of critic steps, so the delay's phase must carry over too.
+        assert_eq!(a.n_updates() % 2, 1, "{}", a.n_updates());
+        let weights = a.weights().unwrap();
+        let state = a.training_state().unwrap();
+
+        let mut b = Td3::new(small_config(), 3, 1, 2, 99).unwrap();
+        b.load_weights(&weights).unwrap();
+        b.load_training_state(&state).unwrap();
+        b.set_num_timesteps(a.num_timesteps());
+        let mut c = Td3::new(small_config(), 3, 1, 2, 99).unwrap();
+        c.load_weights(&weights).unwrap();
+        c.set_num_timesteps(a.num_timesteps());
+
+        let run = |td3: &mut Td3| {
+            let mut venv = pendulums(2, 50);
+            let stats: Vec<_> = (0..6)
+                .map(|_| td3.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap())
+                .collect();
+            let actions = td3
+                .predict(&[0.5f32, -0.3, 1.0, 0.1, 0.9, -2.0], false)
+                .unwrap();
+            (
+                stats,
+                actions,
+                snapshot(&td3.weights().unwrap()),
+                td3.n_updates(),
+            )
+        };
+        let (ra, rb, rc) = (run(&mut a), run(&mut b), run(&mut c));
+        assert!(!ra.0.iter().all(|s| s.is_empty()));
+        assert_eq!(ra, rb);
+        assert_ne!(ra.0, rc.0);
+
+        for key in [
+            "actor_opt.adam.m.actor.l0.bias",
+            "td3.rng.seed",
+            "td3.replay.actions",
+            "td3.n_updates",
+        ] {
+            let mut broken = state.clone();
+            broken.remove(key).unwrap();
+            let err = b.load_training_state(&broken).unwrap_err().to_string();
+            assert!(
+                err.contains(&key[key.find("adam").unwrap_or(0)..]),
+                "{key}: {err}"
+            );
+        }
+        let mut extra = weights.clone();
+        extra.insert(
+            "critic.qf3.l0.weight".into(),
+            Tensor::zeros(1, DType::F32, &Device::Cpu).unwrap(),
+        );
+        let err = b.load_weights(&extra).unwrap_err().to_string();
+        assert!(err.contains("critic.qf3.l0.weight"), "{err}");
+    }
+
+    #[test]
+    fn validate_names_each_bad_setting() {
+        let d = Td3Config::default;
+        let cases: Vec<(&str, Td3Config)> = vec![
+            (
+                "learning_rate",
+                Td3Config {
+                    learning_rate: -1.0,
+                    ..d()
+                },
+            ),
+            (
+                "buffer_size",
+                Td3Config {
+                    buffer_size: 0,
+                    ..d()
+                },
+            ),
+            (
+                "batch_size",
+                Td3Config {
+                    batch_size: 0,
+                    ..d()
+                },
+            ),
+            ("tau", Td3Config { tau: 0.0, ..d() }),
+            ("gamma", Td3Config { gamma: 1.5, ..d() }),
+            (
+                "utd_ratio",
+                Td3Config {
+                    utd_ratio: f32::NAN,
+                    ..d()
+                },
+            ),
+            (
+                "policy_delay",
+                Td3Config {
+                    policy_delay: 0,
+                    ..d()
+                },
+            ),
+            (
+                "target_policy_noise",
+                Td3Config {
+                    target_policy_noise: -0.2,
+                    ..d()
+                },
+            ),
+            (
+                "target_noise_clip",
+                Td3Config {
+                    target_noise_clip: f32::INFINITY,
+                    ..d()
+                },
+            ),
+            (
+                "action_noise",
+                Td3Config {
+                    action_noise: -0.1,
+                    ..d()
+                },
+            ),
+            (
+                "net_arch",
+                Td3Config {
+                    net_arch: vec![],
+                    ..d()
+                },
+            ),
+        ];
+        validate(&d(), 4).unwrap();
+        for (key, config) in cases {
+            match validate(&config, 4) {
+                Err(RlError::Config { key: k, .. }) => assert_eq!(k, format!("td3.{key}")),
+                other => panic!("{key}: {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn environments_outside_the_unit_box_are_refused() {
+        let mut td3 = Td3::new(small_config(), 3, 1, 1, 0).unwrap();
+        let mut venv = VecEnv::new(vec![Pendulum::new()], 1).unwrap();
+        venv.reset(Some(0)).unwrap();
+        let err = td3
+            .learn_iteration(&mut venv, 1.0, &mut |_| {})
+            .unwrap_err();
+        assert!(
+            err.to_string().contains("TD3") && err.to_string().contains("RescaleAction"),
+            "{err}"
+        );
+    }
+}
