@@ -11,6 +11,28 @@ use rand::Rng;
 /// Output-layer gain of the critics (see [`Mlp::new`]).
 const CRITIC_OUTPUT_GAIN: f64 = 1.0;
 
+/// Online twin critics named `critic.…`, their target copy named `critic_target.…`, and the
+/// pairs the Polyak update walks: what SAC and TD3 build alike.
+pub fn critics_with_target(
+    obs_dim: usize,
+    act_dim: usize,
+    net_arch: &[usize],
+    activation: Activation,
+    features: &FeaturesConfig,
+) -> Result<(TwinCritics, TwinCritics, TargetPairs)> {
+    let critics = |prefix: &str| {
+        TwinCritics::zeroed(prefix, obs_dim, act_dim, net_arch, activation, features)
+    };
+    let (critic, critic_target) = (critics("critic")?, critics("critic_target")?);
+    let pairs = TargetPairs::new(
+        &critic.varmap,
+        "critic.",
+        &critic_target.varmap,
+        "critic_target.",
+    )?;
+    Ok((critic, critic_target, pairs))
+}
+
 /// Twin Q networks (Fujimoto et al. 2018: the minimum of two critics curbs the overestimation
 /// a single one accumulates). The two share one feature extractor.
 pub struct TwinCritics {

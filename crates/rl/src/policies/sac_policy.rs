@@ -9,7 +9,7 @@ use crate::distributions::{SquashedDiagGaussian, standard_normal_tensor};
 use crate::error::Result;
 use crate::nn::Mlp;
 use crate::policies::actor_critic::obs_tensor;
-use crate::policies::critics::{TargetPairs, TwinCritics};
+use crate::policies::critics::{TargetPairs, TwinCritics, critics_with_target};
 use crate::policies::features::FeaturesExtractor;
 use crate::sac::SacConfig;
 use candle_core::{DType, Device, Tensor};
@@ -111,22 +111,12 @@ impl SacPolicy {
     /// The networks with zero weights (see [`Self::init_weights`]).
     pub fn zeroed(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
         let actor = SacActor::zeroed(obs_dim, act_dim, config)?;
-        let critics = |prefix: &str| {
-            TwinCritics::zeroed(
-                prefix,
-                obs_dim,
-                act_dim,
-                &config.net_arch,
-                config.activation,
-                &config.features,
-            )
-        };
-        let (critic, critic_target) = (critics("critic")?, critics("critic_target")?);
-        let critic_pairs = TargetPairs::new(
-            &critic.varmap,
-            "critic.",
-            &critic_target.varmap,
-            "critic_target.",
+        let (critic, critic_target, critic_pairs) = critics_with_target(
+            obs_dim,
+            act_dim,
+            &config.net_arch,
+            config.activation,
+            &config.features,
         )?;
         Ok(Self {
             actor,

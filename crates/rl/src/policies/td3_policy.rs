@@ -6,7 +6,7 @@
 use crate::error::Result;
 use crate::nn::Mlp;
 use crate::policies::actor_critic::obs_tensor;
-use crate::policies::critics::{TargetPairs, TwinCritics};
+use crate::policies::critics::{TargetPairs, TwinCritics, critics_with_target};
 use crate::policies::features::FeaturesExtractor;
 use crate::td3::Td3Config;
 use candle_core::{DType, Device, Tensor};
@@ -104,17 +104,13 @@ impl Td3Policy {
     pub fn zeroed(obs_dim: usize, act_dim: usize, config: &Td3Config) -> Result<Self> {
         let actor = Td3Actor::zeroed("actor", obs_dim, act_dim, config)?;
         let actor_target = Td3Actor::zeroed("actor_target", obs_dim, act_dim, config)?;
-        let critics = |prefix: &str| {
-            TwinCritics::zeroed(
-                prefix,
-                obs_dim,
-                act_dim,
-                &config.net_arch,
-                config.activation,
-                &config.features,
-            )
-        };
-        let (critic, critic_target) = (critics("critic")?, critics("critic_target")?);
+        let (critic, critic_target, critic_pairs) = critics_with_target(
+            obs_dim,
+            act_dim,
+            &config.net_arch,
+            config.activation,
+            &config.features,
+        )?;
         Ok(Self {
             actor_pairs: TargetPairs::new(
                 &actor.varmap,
@@ -122,12 +118,7 @@ impl Td3Policy {
                 &actor_target.varmap,
                 "actor_target.",
             )?,
-            critic_pairs: TargetPairs::new(
-                &critic.varmap,
-                "critic.",
-                &critic_target.varmap,
-                "critic_target.",
-            )?,
+            critic_pairs,
             actor,
             actor_target,
             critic,
