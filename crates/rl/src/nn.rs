@@ -141,12 +141,12 @@ impl Mlp {
             // What candle-nn's `Linear` computes, with the bias added by one op.
             x = x.matmul(&w.t()?)?;
             if let Some(b) = &b {
-                x = crate::fused::add_bias(&x, b)?;
+                x = crate::kernels::candle_ops::add_bias(&x, b)?;
             }
             if i < last {
                 x = match self.activation {
-                    Activation::Tanh => crate::fast_tanh::tanh_tensor(&x)?,
-                    Activation::Relu => crate::fused::relu(&x)?,
+                    Activation::Tanh => crate::kernels::tanh::tanh_tensor(&x)?,
+                    Activation::Relu => crate::kernels::candle_ops::relu(&x)?,
                 };
             }
         }
@@ -159,7 +159,7 @@ impl Mlp {
 ///
 /// The step runs as plain loops over each parameter's values, updating the variable in place.
 /// As candle tensor operations it was ~16 operations (each allocating its result) per parameter
-/// tensor, 200 per PPO minibatch: with PPO's loss written out ([`crate::ppo_loss`]) that was
+/// tensor, 200 per PPO minibatch: with PPO's loss written out ([`crate::kernels::ppo_loss`]) that was
 /// 0.55 ms per design-setting minibatch step, 0.41–0.46 ms with these loops. They do the same
 /// f32 arithmetic in the same order (candle's `x · c` is `x · (c as f32) + 0`, its sums are
 /// [`VecOps::vec_reduce_sum`]), so the weights are bit-identical to the tensor version's.

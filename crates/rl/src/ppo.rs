@@ -11,10 +11,10 @@ use crate::algorithm::{
 };
 use crate::buffers::RolloutBuffer;
 use crate::error::{Result, RlError};
+use crate::kernels::ppo_loss::{FusedPpoLoss, Minibatch, MinibatchStats};
 use crate::nn::{Activation, Adam};
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
-use crate::ppo_loss::{FusedPpoLoss, Minibatch, MinibatchStats};
 use candle_core::{DType, Device, Tensor};
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand::SeedableRng;
@@ -115,7 +115,7 @@ pub struct Ppo {
     /// Whether each environment's current observation starts an episode (SB3's
     /// `_last_episode_starts`).
     episode_starts: Vec<bool>,
-    /// Whether updates run the loss written out ([`crate::ppo_loss`]) where it supports the
+    /// Whether updates run the loss written out ([`crate::kernels::ppo_loss`]) where it supports the
     /// configuration; off, candle's autograd computes the same weights, slower.
     pub written_out_loss: bool,
     fused: FusedPpoLoss,

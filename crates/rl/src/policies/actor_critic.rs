@@ -3,7 +3,7 @@
 
 use crate::distributions::{DiagGaussian, log_prob_term, standard_normal_tensor};
 use crate::error::{Result, RlError};
-use crate::fused_mlp;
+use crate::kernels::mlp;
 use crate::nn::{Activation, Mlp, standard_normal};
 use crate::policies::features::{FeaturesConfig, FeaturesExtractor};
 use crate::ppo::PpoConfig;
@@ -28,7 +28,7 @@ pub struct ActorCritic {
     pub obs_dim: usize,
     pub act_dim: usize,
     device: Device,
-    /// Whether acting runs the networks written out ([`crate::fused_mlp`]: tanh layers on flat
+    /// Whether acting runs the networks written out ([`crate::kernels::mlp`]: tanh layers on flat
     /// observations) instead of through candle tensors.
     written_out: bool,
 }
@@ -98,7 +98,7 @@ impl ActorCritic {
         obs_tensor(obs, self.obs_dim, &self.device)
     }
 
-    /// The policy and value networks (for [`crate::ppo_loss`], which runs them written out).
+    /// The policy and value networks (for [`crate::kernels::ppo_loss`], which runs them written out).
     pub(crate) fn heads(&self) -> (&Mlp, &Mlp) {
         (&self.pi, &self.vf)
     }
@@ -132,7 +132,7 @@ impl ActorCritic {
     pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
         if self.written_out {
             let rows = self.rows(obs)?;
-            return Ok(fused_mlp::forward_mlp(&self.vf, obs, rows)?);
+            return Ok(mlp::forward_mlp(&self.vf, obs, rows)?);
         }
         let features = self.features.forward(&self.obs_tensor(obs)?)?;
         Ok(self.vf.forward(&features)?.flatten_all()?.to_vec1()?)
@@ -163,13 +163,13 @@ impl ActorCritic {
                     {
                         *t = log_prob_term((a - mu) * inv_std[j], log_std[j]);
                     }
-                    fused_mlp::sum(&terms)
+                    mlp::sum(&terms)
                 })
                 .collect();
             return Ok(PolicyOutput {
                 log_probs,
                 actions,
-                values: fused_mlp::forward_mlp(&self.vf, obs, rows)?,
+                values: mlp::forward_mlp(&self.vf, obs, rows)?,
             });
         }
         let (dist, values) = self.forward(&self.obs_tensor(obs)?)?;
@@ -222,7 +222,7 @@ impl ActorCritic {
         deterministic: bool,
         rng: &mut impl Rng,
     ) -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
-        let means = fused_mlp::forward_mlp(&self.pi, obs, rows)?;
+        let means = mlp::forward_mlp(&self.pi, obs, rows)?;
         let log_std: Vec<f32> = self.log_std.as_tensor().to_vec1()?;
         if deterministic {
             return Ok((means.clone(), means, log_std));

@@ -167,7 +167,7 @@ impl TargetPairs {
     /// Polyak averaging: `target ← (1 − τ) target + τ online`, in place.
     pub fn soft_update(&self, tau: f32) -> Result<()> {
         for (online, target) in &self.0 {
-            crate::fused::polyak_update(target, online.as_tensor(), tau as f64)?;
+            crate::kernels::candle_ops::polyak_update(target, online.as_tensor(), tau as f64)?;
         }
         Ok(())
     }

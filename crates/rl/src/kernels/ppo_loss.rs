@@ -8,14 +8,14 @@
 //!
 //! Every value is computed as candle computed it in [`crate::ppo::Ppo::update`]'s tensor code
 //! (kept as the general path), in the same order: sums through candle's
-//! `VecOps::vec_reduce_sum` ([`fused_mlp::sum`]), `x · c` as `x · (c as f32) + 0`, the gradients of `minimum`,
+//! `VecOps::vec_reduce_sum` ([`mlp::sum`]), `x · c` as `x · (c as f32) + 0`, the gradients of `minimum`,
 //! `maximum` and the broadcasts by candle's rules, and the log standard deviation's three
 //! gradient contributions accumulated in candle's order. So the weights it trains are
 //! bit-identical to the tensor code's (tested below and on whole training runs).
 
 use crate::distributions::{HALF_LN_2PI, log_prob_term};
 use crate::error::Result;
-use crate::fused_mlp::{self, MlpBuffers, VarValues, sum};
+use crate::kernels::mlp::{self, MlpBuffers, VarValues, sum};
 use crate::nn::Activation;
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
@@ -93,8 +93,8 @@ impl FusedPpoLoss {
                 .flat_map(|(w, b)| [*w, *b])
                 .chain([policy.log_std()]),
         );
-        let pi_layers = fused_mlp::layers_from(&values, &pi_vars, 0)?;
-        let vf_layers = fused_mlp::layers_from(&values, &vf_vars, 2 * pi_vars.len())?;
+        let pi_layers = mlp::layers_from(&values, &pi_vars, 0)?;
+        let vf_layers = mlp::layers_from(&values, &vf_vars, 2 * pi_vars.len())?;
         let log_std = values.get(2 * (pi_vars.len() + vf_vars.len()))?;
 
         // Advantages, normalised as `(A − mean) / (std + 1e-8)`.
@@ -111,8 +111,8 @@ impl FusedPpoLoss {
             }
         }
 
-        fused_mlp::forward(&pi_layers, batch.observations, n, &mut self.pi);
-        fused_mlp::forward(&vf_layers, batch.observations, n, &mut self.vf);
+        mlp::forward(&pi_layers, batch.observations, n, &mut self.pi);
+        mlp::forward(&vf_layers, batch.observations, n, &mut self.vf);
         let means = self.pi.outputs.last().expect("pi has layers");
         let state_values = self.vf.outputs.last().expect("vf has layers");
 
@@ -232,7 +232,7 @@ impl FusedPpoLoss {
 
         self.pi_grads.resize_with(pi_layers.len(), Default::default);
         self.vf_grads.resize_with(vf_layers.len(), Default::default);
-        fused_mlp::backward(
+        mlp::backward(
             &pi_layers,
             batch.observations,
             n,
@@ -240,7 +240,7 @@ impl FusedPpoLoss {
             &mut self.pi,
             &mut self.pi_grads,
         );
-        fused_mlp::backward(
+        mlp::backward(
             &vf_layers,
             batch.observations,
             n,

@@ -5,15 +5,15 @@
 //! through candle's autograd ran a few hundred tensor operations, each allocating its result
 //! and costing microseconds whatever its size: ~1 ms of CPU per minibatch step, of which the
 //! arithmetic is a small part. Here the same arithmetic runs on reused buffers (0.3 ms, with
-//! [`crate::ppo_loss`]).
+//! [`crate::kernels::ppo_loss`]).
 //!
 //! The results are bit-identical to candle's: the matrix products call the same `gemm` routine
 //! with the same shapes, strides and threading as candle's CPU backend does for `Linear`
 //! (`x · Wᵀ`, and `g · W`, `xᵀ · g` in its backward pass), the bias gradients sum rows in
 //! candle's order, and the elementwise steps are candle's formulas (tanh through
-//! [`crate::fast_tanh::tanh`], its slope `1 − y²` as `y² · (−1) + 1`).
+//! [`crate::kernels::tanh::tanh`], its slope `1 − y²` as `y² · (−1) + 1`).
 
-use crate::fast_tanh;
+use crate::kernels::tanh;
 use crate::nn::Mlp;
 use candle_core::cpu::kernels::VecOps;
 use candle_core::{CpuStorage, Layout, Storage, Tensor};
@@ -190,7 +190,7 @@ pub fn forward(layers: &[LayerParams<'_>], x: &[f32], batch: usize, buffers: &mu
             }
         }
         if l < last {
-            fast_tanh::tanh_in_place(out);
+            tanh::tanh_in_place(out);
         }
     }
 }

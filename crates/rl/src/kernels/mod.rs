@@ -1,0 +1,16 @@
+//! The networks' hot paths written out by hand, each computing exactly what candle's ops
+//! computed (the same f32 operations in the same order, so trained weights are bit-identical
+//! to candle's, tested in each module):
+//! - [`tanh`]: a vectorised tanh (candle's called libm once per value);
+//! - [`candle_ops`]: a linear layer's bias add, ReLU and in-place Polyak averaging as single
+//!   candle ops, for the networks that still run through candle's autograd (SAC, TD3);
+//! - [`mlp`]: an MLP's forward and backward passes on plain slices (PPO's networks);
+//! - [`ppo_loss`]: PPO's minibatch loss and its gradient on top of [`mlp`].
+//!
+//! Why by hand: at these networks' sizes candle's per-op allocation and bookkeeping cost more
+//! than the arithmetic (each module says by how much).
+
+pub mod candle_ops;
+pub mod mlp;
+pub mod ppo_loss;
+pub mod tanh;
