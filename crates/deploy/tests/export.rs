@@ -12,6 +12,7 @@ use fairgrasp_rl::nn::{Activation, standard_normal};
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use fairgrasp_rl::sac::{Sac, SacConfig};
+use fairgrasp_rl::td3::{Td3, Td3Config};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
@@ -37,7 +38,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
     let env = registry::make(case.env_id, &env_table(&case.env).unwrap()).unwrap();
     let (obs_dim, act_dim) = (env.observation_space().dim(), env.action_space().dim());
     let net_arch = vec![64, 32];
-    let (ppo, sac, weights) = match case.algo {
+    let (ppo, sac, td3, weights) = match case.algo {
         "ppo" => {
             let config = PpoConfig {
                 net_arch,
@@ -45,7 +46,18 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
                 ..PpoConfig::default()
             };
             let learner = Ppo::new(config.clone(), obs_dim, act_dim, 1, seed).unwrap();
-            (Some(config), None, learner.weights().unwrap())
+            (Some(config), None, None, learner.weights().unwrap())
+        }
+        "td3" => {
+            let config = Td3Config {
+                net_arch,
+                activation: case.activation,
+                buffer_size: 100,
+                batch_size: 10,
+                ..Td3Config::default()
+            };
+            let learner = Td3::new(config.clone(), obs_dim, act_dim, 1, seed).unwrap();
+            (None, None, Some(config), learner.weights().unwrap())
         }
         _ => {
             let config = SacConfig {
@@ -56,7 +68,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
                 ..SacConfig::default()
             };
             let learner = Sac::new(config.clone(), obs_dim, act_dim, 1, seed).unwrap();
-            (None, Some(config), learner.weights().unwrap())
+            (None, Some(config), None, learner.weights().unwrap())
         }
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -96,7 +108,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
         act_dim,
         ppo,
         sac,
-        td3: None,
+        td3,
         env_id: case.env_id.into(),
         env: case.env.clone(),
         normalization,
@@ -244,6 +256,18 @@ fn onnx_ppo_joint_policy_matches_our_inference() {
 fn onnx_sac_cartesian_policy_matches_our_inference() {
     let case = Case {
         algo: "sac",
+        env_id: "FaArmGrasp-v0",
+        env: serde_json::json!({ "control": { "action_mode": "cartesian" } }),
+        activation: Activation::Relu,
+        normalize: true,
+    };
+    check_onnx(&case);
+}
+
+#[test]
+fn onnx_td3_cartesian_policy_matches_our_inference() {
+    let case = Case {
+        algo: "td3",
         env_id: "FaArmGrasp-v0",
         env: serde_json::json!({ "control": { "action_mode": "cartesian" } }),
         activation: Activation::Relu,

@@ -43,7 +43,8 @@ pub struct Dense {
 pub enum Head {
     /// PPO: the Gaussian's mean, as it is.
     Mean,
-    /// SAC: the squashed Gaussian's mode, `tanh(mean)`.
+    /// SAC: the squashed Gaussian's mode, `tanh(mean)`; TD3: its deterministic actor's
+    /// `tanh(output)`, the same graph.
     TanhMean,
 }
 
@@ -60,7 +61,7 @@ pub struct ActionBox {
 pub struct PolicySpec {
     pub env_id: String,
     pub env_config: serde_json::Value,
-    /// `ppo` or `sac`.
+    /// `ppo`, `sac` or `td3`.
     pub algo: String,
     pub obs_dim: usize,
     pub act_dim: usize,
@@ -104,6 +105,19 @@ impl PolicySpec {
                     Head::TanhMean,
                 )
             }
+            "td3" => {
+                let c = meta
+                    .td3
+                    .as_ref()
+                    .ok_or_else(|| fail("no td3 settings".into()))?;
+                (
+                    "actor",
+                    &c.net_arch,
+                    c.activation,
+                    &c.features,
+                    Head::TanhMean,
+                )
+            }
             other => return Err(fail(format!("cannot export algorithm `{other}`"))),
         };
         // The flatten extractor is the identity on flat observations. A new extractor must be
@@ -132,7 +146,7 @@ impl PolicySpec {
             };
             if i == net_arch.len() && head == Head::TanhMean {
                 // SAC's last layer gives the means, then the log standard deviations, which a
-                // deterministic action does not use.
+                // deterministic action does not use (TD3's gives the actions alone: a no-op).
                 layer.outputs = meta.act_dim;
                 layer.weight.truncate(meta.act_dim * inputs);
                 layer.bias.truncate(meta.act_dim);
