@@ -257,7 +257,7 @@ impl Sac {
         let lr = config.learning_rate;
         Ok(Self {
             actor_opt: Adam::new(&nets.policy.actor.varmap, lr)?,
-            critic_opt: Adam::new(&nets.policy.critic.varmap, lr)?,
+            critic_opt: Adam::new(&nets.policy.critics.online.varmap, lr)?,
             alpha_opt: match &nets.log_alpha {
                 Some((varmap, _)) => Some(Adam::new(varmap, lr)?),
                 None => None,
@@ -336,10 +336,10 @@ impl Sac {
         let (next_actions, next_log_probs) =
             policy.actor.distribution(&next_obs)?.sample(&next_eps)?;
         let next_q =
-            (policy.critic_target.min_q(&next_obs, &next_actions)? - (next_log_probs * alpha)?)?;
+            (policy.critics.target.min_q(&next_obs, &next_actions)? - (next_log_probs * alpha)?)?;
         let target = (rewards + ((not_done * next_q)? * gamma)?)?.detach();
 
-        let (q1, q2) = policy.critic.q(&obs, &actions)?;
+        let (q1, q2) = policy.critics.online.q(&obs, &actions)?;
         let critic_loss =
             (((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)? * 0.5)?;
         self.critic_opt.backward_step(&critic_loss, 0.0)?;
@@ -348,7 +348,7 @@ impl Sac {
         // constant: only the actor's optimiser steps.
         let eps = self.core.noise(b)?;
         let (pi_actions, log_probs) = policy.actor.distribution(&obs)?.sample(&eps)?;
-        let q_pi = policy.critic.min_q_detached(&obs, &pi_actions)?;
+        let q_pi = policy.critics.online.min_q_detached(&obs, &pi_actions)?;
         let actor_loss = ((&log_probs * alpha)? - q_pi)?.mean_all()?;
         self.actor_opt.backward_step(&actor_loss, 0.0)?;
 
@@ -448,7 +448,7 @@ impl Algorithm for Sac {
             Ok(opt)
         };
         let actor_opt = load_opt(&self.nets.policy.actor.varmap, "actor_opt.")?;
-        let critic_opt = load_opt(&self.nets.policy.critic.varmap, "critic_opt.")?;
+        let critic_opt = load_opt(&self.nets.policy.critics.online.varmap, "critic_opt.")?;
         let alpha_opt = match &self.nets.log_alpha {
             Some((varmap, _)) => Some(load_opt(varmap, "alpha_opt.")?),
             None => None,
@@ -509,16 +509,16 @@ mod tests {
     fn polyak_update_moves_targets_by_tau() {
         let sac = Sac::new(small_config(), 3, 1, 2, 0).unwrap();
         // Make the online critics differ from their targets.
-        for (online, _) in &sac.nets.policy.critic_pairs.0 {
+        for (online, _) in &sac.nets.policy.critics.pairs.0 {
             online
                 .set(&online.as_tensor().randn_like(0.0, 1.0).unwrap())
                 .unwrap();
         }
-        let before = snapshot(&varmap_tensors(&sac.nets.policy.critic_target.varmap, ""));
-        let online = snapshot(&varmap_tensors(&sac.nets.policy.critic.varmap, ""));
+        let before = snapshot(&varmap_tensors(&sac.nets.policy.critics.target.varmap, ""));
+        let online = snapshot(&varmap_tensors(&sac.nets.policy.critics.online.varmap, ""));
         let tau = 0.25;
         sac.nets.policy.soft_update(tau).unwrap();
-        let after = snapshot(&varmap_tensors(&sac.nets.policy.critic_target.varmap, ""));
+        let after = snapshot(&varmap_tensors(&sac.nets.policy.critics.target.varmap, ""));
         assert_eq!(after.len(), online.len());
         for (name, t_after) in &after {
             let o = &online[&name.replacen("critic_target.", "critic.", 1)];
@@ -534,7 +534,7 @@ mod tests {
         // The online critics are untouched.
         assert_eq!(
             online,
-            snapshot(&varmap_tensors(&sac.nets.policy.critic.varmap, ""))
+            snapshot(&varmap_tensors(&sac.nets.policy.critics.online.varmap, ""))
         );
     }
 

@@ -177,7 +177,7 @@ impl Td3 {
         let lr = config.learning_rate;
         Ok(Self {
             actor_opt: Adam::new(&policy.actor.varmap, lr)?,
-            critic_opt: Adam::new(&policy.critic.varmap, lr)?,
+            critic_opt: Adam::new(&policy.critics.online.varmap, lr)?,
             policy,
             core,
             config,
@@ -243,10 +243,10 @@ impl Td3 {
         let eps = self.core.noise(b)?;
         let next_actions = self.smoothed_target_actions(&next_obs, &eps)?;
         let policy = &self.policy;
-        let next_q = policy.critic_target.min_q(&next_obs, &next_actions)?;
+        let next_q = policy.critics.target.min_q(&next_obs, &next_actions)?;
         let target = (rewards + ((not_done * next_q)? * self.config.gamma as f64)?)?.detach();
 
-        let (q1, q2) = policy.critic.q(&obs, &actions)?;
+        let (q1, q2) = policy.critics.online.q(&obs, &actions)?;
         let critic_loss =
             ((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)?;
         self.critic_opt.backward_step(&critic_loss, 0.0)?;
@@ -260,7 +260,8 @@ impl Td3 {
         {
             // Deterministic policy gradient through the first critic, its weights constant.
             let loss = policy
-                .critic
+                .critics
+                .online
                 .q1_detached(&obs, &policy.actor.forward(&obs)?)?
                 .mean_all()?
                 .neg()?;
@@ -346,7 +347,7 @@ impl Algorithm for Td3 {
             Ok(opt)
         };
         let actor_opt = load_opt(&self.policy.actor.varmap, "actor_opt.")?;
-        let critic_opt = load_opt(&self.policy.critic.varmap, "critic_opt.")?;
+        let critic_opt = load_opt(&self.policy.critics.online.varmap, "critic_opt.")?;
         self.core.read_state(state)?.apply(&mut self.core, state)?;
         self.actor_opt = actor_opt;
         self.critic_opt = critic_opt;
