@@ -7,7 +7,9 @@
 use crate::algorithm::{TensorMap, rng_from_state, rng_state};
 use crate::buffers::{ReplayBuffer, ReplaySample};
 use crate::error::{Result, RlError};
+use crate::nn::Adam;
 use candle_core::{DType, Device, Tensor};
+use candle_nn::VarMap;
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -198,6 +200,21 @@ impl OffPolicyCore {
         Ok(state)
     }
 
+    /// The optimisers' states, each under its prefix (`actor_opt.adam.m.…`), with
+    /// [`Self::state`]: an algorithm's whole training state.
+    pub fn training_state(&self, optimizers: &[(&str, &Adam)]) -> Result<TensorMap> {
+        let mut state = TensorMap::new();
+        for (prefix, opt) in optimizers {
+            state.extend(
+                opt.state()?
+                    .into_iter()
+                    .map(|(k, v)| (format!("{prefix}{k}"), v)),
+            );
+        }
+        state.extend(self.state()?);
+        Ok(state)
+    }
+
     /// Reads the counters and stream of a state saved by [`Self::state`] without changing
     /// anything; [`Restored::apply`] puts them and the buffer in place (so an algorithm can
     /// check its own parts first).
@@ -238,6 +255,15 @@ impl Restored {
         core.n_updates = self.n_updates;
         Ok(())
     }
+}
+
+/// A new optimiser of `varmap` with the moments saved under `prefix` in `state` (by
+/// [`OffPolicyCore::training_state`]); an error names what is missing and the prefix.
+pub fn load_adam(state: &TensorMap, prefix: &str, varmap: &VarMap, lr: f64) -> Result<Adam> {
+    let mut opt = Adam::new(varmap, lr)?;
+    opt.load_state(&unprefixed(state, prefix))
+        .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
+    Ok(opt)
 }
 
 /// The entries of `state` under `prefix`, without it.

@@ -19,7 +19,7 @@ use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
 use crate::buffers::ReplayBuffer;
 use crate::error::{Result, RlError};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, unprefixed};
+use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, load_adam};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::sac_policy::{SacActor, SacPolicy};
 use candle_core::{DType, Device, Var};
@@ -419,7 +419,6 @@ impl Algorithm for Sac {
     }
 
     fn training_state(&self) -> Result<TensorMap> {
-        let mut state = TensorMap::new();
         let mut optimizers = vec![
             ("actor_opt.", &self.actor_opt),
             ("critic_opt.", &self.critic_opt),
@@ -427,30 +426,17 @@ impl Algorithm for Sac {
         if let Some(opt) = &self.alpha_opt {
             optimizers.push(("alpha_opt.", opt));
         }
-        for (prefix, opt) in optimizers {
-            state.extend(
-                opt.state()?
-                    .into_iter()
-                    .map(|(k, v)| (format!("{prefix}{k}"), v)),
-            );
-        }
-        state.extend(self.core.state()?);
-        Ok(state)
+        self.core.training_state(&optimizers)
     }
 
     fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
         // Everything is read into new values first, so a bad state changes nothing.
         let lr = self.config.learning_rate;
-        let load_opt = |varmap: &VarMap, prefix: &str| -> Result<Adam> {
-            let mut opt = Adam::new(varmap, lr)?;
-            opt.load_state(&unprefixed(state, prefix))
-                .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
-            Ok(opt)
-        };
-        let actor_opt = load_opt(&self.nets.policy.actor.varmap, "actor_opt.")?;
-        let critic_opt = load_opt(&self.nets.policy.critics.online.varmap, "critic_opt.")?;
+        let policy = &self.nets.policy;
+        let actor_opt = load_adam(state, "actor_opt.", &policy.actor.varmap, lr)?;
+        let critic_opt = load_adam(state, "critic_opt.", &policy.critics.online.varmap, lr)?;
         let alpha_opt = match &self.nets.log_alpha {
-            Some((varmap, _)) => Some(load_opt(varmap, "alpha_opt.")?),
+            Some((varmap, _)) => Some(load_adam(state, "alpha_opt.", varmap, lr)?),
             None => None,
         };
         self.core.read_state(state)?.apply(&mut self.core, state)?;

@@ -16,11 +16,10 @@
 use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
 use crate::error::{Result, RlError};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, unprefixed};
+use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, load_adam};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::td3_policy::{Td3Actor, Td3Policy};
 use candle_core::Tensor;
-use candle_nn::VarMap;
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -322,32 +321,17 @@ impl Algorithm for Td3 {
     }
 
     fn training_state(&self) -> Result<TensorMap> {
-        let mut state = TensorMap::new();
-        for (prefix, opt) in [
+        self.core.training_state(&[
             ("actor_opt.", &self.actor_opt),
             ("critic_opt.", &self.critic_opt),
-        ] {
-            state.extend(
-                opt.state()?
-                    .into_iter()
-                    .map(|(k, v)| (format!("{prefix}{k}"), v)),
-            );
-        }
-        state.extend(self.core.state()?);
-        Ok(state)
+        ])
     }
 
     fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
         // Everything is read into new values first, so a bad state changes nothing.
         let lr = self.config.learning_rate;
-        let load_opt = |varmap: &VarMap, prefix: &str| -> Result<Adam> {
-            let mut opt = Adam::new(varmap, lr)?;
-            opt.load_state(&unprefixed(state, prefix))
-                .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
-            Ok(opt)
-        };
-        let actor_opt = load_opt(&self.policy.actor.varmap, "actor_opt.")?;
-        let critic_opt = load_opt(&self.policy.critics.online.varmap, "critic_opt.")?;
+        let actor_opt = load_adam(state, "actor_opt.", &self.policy.actor.varmap, lr)?;
+        let critic_opt = load_adam(state, "critic_opt.", &self.policy.critics.online.varmap, lr)?;
         self.core.read_state(state)?.apply(&mut self.core, state)?;
         self.actor_opt = actor_opt;
         self.critic_opt = critic_opt;
