@@ -14,6 +14,9 @@ use fairgrasp_env::{VecStep, VectorEnv};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+#[cfg(test)]
+pub(crate) mod test_support;
+
 /// The settings of the learn loop (each algorithm's config has them under SB3's names).
 #[derive(Clone, Copy, Debug)]
 pub struct LoopSettings {

@@ -454,11 +454,13 @@ impl Algorithm for Sac {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::off_policy::test_support::{
+        assert_training_state_resumes, assert_validate_names_keys, fill_replay, pendulums,
+        snapshot, unit_box_error, weights_of,
+    };
     use candle_core::Tensor;
+    use fairgrasp_env::Env;
     use fairgrasp_env::tasks::classic::Pendulum;
-    use fairgrasp_env::wrappers::RescaleAction;
-    use fairgrasp_env::{Env, VecEnv};
-    use std::collections::HashMap;
 
     fn small_config() -> SacConfig {
         SacConfig {
@@ -470,25 +472,6 @@ mod tests {
             utd_ratio: 0.75,
             ..SacConfig::default()
         }
-    }
-
-    fn pendulums(n: usize, seed: u64) -> VecEnv<RescaleAction<Pendulum>> {
-        let envs = (0..n)
-            .map(|_| RescaleAction::new(Pendulum::new()).unwrap())
-            .collect();
-        let mut venv = VecEnv::new(envs, 1).unwrap();
-        venv.reset(Some(seed)).unwrap();
-        venv
-    }
-
-    /// Deep copies of tensors (a variable's tensor shares its storage, which training changes).
-    fn snapshot(map: &TensorMap) -> HashMap<String, Vec<f32>> {
-        map.iter()
-            .map(|(k, t)| {
-                let values = t.flatten_all().unwrap().to_dtype(DType::F32).unwrap();
-                (k.clone(), values.to_vec1().unwrap())
-            })
-            .collect()
     }
 
     #[test]
@@ -526,24 +509,9 @@ mod tests {
 
     #[test]
     fn a_seed_fixes_the_initial_networks() {
-        let a = snapshot(
-            &Sac::new(small_config(), 3, 1, 2, 5)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
-        let b = snapshot(
-            &Sac::new(small_config(), 3, 1, 2, 5)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
-        let c = snapshot(
-            &Sac::new(small_config(), 3, 1, 2, 6)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
+        let a = weights_of(&Sac::new(small_config(), 3, 1, 2, 5).unwrap());
+        let b = weights_of(&Sac::new(small_config(), 3, 1, 2, 5).unwrap());
+        let c = weights_of(&Sac::new(small_config(), 3, 1, 2, 6).unwrap());
         assert_eq!(a, b);
         assert_ne!(a["actor.l0.weight"], c["actor.l0.weight"]);
         // The targets start as copies of the critics.
@@ -588,7 +556,7 @@ mod tests {
     fn random_actions_and_no_learning_before_learning_starts() {
         let mut sac = Sac::new(small_config(), 3, 1, 2, 0).unwrap();
         let mut venv = pendulums(2, 0);
-        let initial = snapshot(&sac.weights().unwrap());
+        let initial = weights_of(&sac);
         for _ in 0..19 {
             assert!(
                 sac.learn_iteration(&mut venv, 1.0, &mut |_| {})
@@ -597,7 +565,7 @@ mod tests {
             );
         }
         assert_eq!(sac.n_updates(), 0);
-        assert_eq!(snapshot(&sac.weights().unwrap()), initial);
+        assert_eq!(weights_of(&sac), initial);
         // The random actions cover [-1, 1], unlike the initial policy (σ ≈ 0.22).
         let stored = snapshot(&sac.core.buffer.state("").unwrap());
         let actions = &stored["actions"];
@@ -643,68 +611,23 @@ mod tests {
             a.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap();
         }
         assert!(a.n_updates() > 20 && a.core.grad_accumulator != 0.0);
-        let weights = a.weights().unwrap();
-        let state = a.training_state().unwrap();
-
-        // Learners from another seed: one gets weights and state, one only the weights.
-        let mut b = Sac::new(small_config(), 3, 1, 2, 99).unwrap();
-        b.load_weights(&weights).unwrap();
-        b.load_training_state(&state).unwrap();
-        b.set_num_timesteps(a.num_timesteps());
-        let mut c = Sac::new(small_config(), 3, 1, 2, 99).unwrap();
-        c.load_weights(&weights).unwrap();
-        c.set_num_timesteps(a.num_timesteps());
-        assert_eq!(
-            snapshot(&a.weights().unwrap()),
-            snapshot(&b.weights().unwrap())
+        assert_training_state_resumes(
+            &mut a,
+            || Sac::new(small_config(), 3, 1, 2, 99).unwrap(),
+            Sac::n_updates,
+            &[
+                "critic_opt.adam.v.critic.qf1.l0.bias",
+                "sac.rng.seed",
+                "sac.replay.actions",
+                "sac.grad_accumulator",
+            ],
         );
-
-        let run = |sac: &mut Sac| {
-            let mut venv = pendulums(2, 50);
-            let mut stats = Vec::new();
-            for _ in 0..6 {
-                stats.push(sac.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap());
-            }
-            let obs = [0.5f32, -0.3, 1.0, 0.1, 0.9, -2.0];
-            let actions = sac.predict(&obs, false).unwrap();
-            (
-                stats,
-                actions,
-                snapshot(&sac.weights().unwrap()),
-                sac.n_updates(),
-            )
-        };
-        let (ra, rb, rc) = (run(&mut a), run(&mut b), run(&mut c));
-        assert!(!ra.0.iter().all(|s| s.is_empty()));
-        assert_eq!(ra.0, rb.0);
-        assert_eq!(ra.1, rb.1);
-        assert_eq!(ra.2, rb.2);
-        assert_eq!(ra.3, rb.3);
-        // Without the training state (optimiser moments, replay buffer, random stream) the runs part.
-        assert_ne!(ra.0, rc.0);
-        assert_ne!(ra.1, rc.1);
-
-        // A missing piece is an error that names it, and changes nothing.
-        for key in [
-            "critic_opt.adam.v.critic.qf1.l0.bias",
-            "sac.rng.seed",
-            "sac.replay.actions",
-            "sac.grad_accumulator",
-        ] {
-            let mut broken = state.clone();
-            broken.remove(key).unwrap();
-            let err = b.load_training_state(&broken).unwrap_err().to_string();
-            assert!(
-                err.contains(&key[key.find("adam").unwrap_or(0)..]),
-                "{key}: {err}"
-            );
-        }
     }
 
     #[test]
     fn mismatched_weights_are_rejected_and_change_nothing() {
         let mut a = Sac::new(small_config(), 3, 1, 2, 1).unwrap();
-        let before = snapshot(&a.weights().unwrap());
+        let before = weights_of(&a);
         // Valid new values for the earlier groups (actor, critic), a wrong shape in a later one.
         let mut other = Sac::new(small_config(), 3, 1, 2, 2)
             .unwrap()
@@ -717,7 +640,7 @@ mod tests {
         );
         let err = a.load_weights(&other).unwrap_err().to_string();
         assert!(err.contains(bad), "{err}");
-        assert_eq!(snapshot(&a.weights().unwrap()), before);
+        assert_eq!(weights_of(&a), before);
 
         let mut missing = a.weights().unwrap();
         missing.remove("log_alpha");
@@ -747,7 +670,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("log_alpha"), "{err}");
-        assert_eq!(snapshot(&a.weights().unwrap()), before);
+        assert_eq!(weights_of(&a), before);
     }
 
     #[test]
@@ -824,24 +747,14 @@ mod tests {
                 },
             ),
         ];
-        validate(&SacConfig::default(), 4).unwrap();
-        for (key, config) in cases {
-            match validate(&config, 4) {
-                Err(RlError::Config { key: k, .. }) => assert_eq!(k, format!("sac.{key}")),
-                other => panic!("{key}: {other:?}"),
-            }
-        }
+        assert_validate_names_keys("sac", validate, &SacConfig::default(), cases);
     }
 
     #[test]
     fn environments_outside_the_unit_box_are_refused() {
         let mut sac = Sac::new(small_config(), 3, 1, 1, 0).unwrap();
-        let mut venv = VecEnv::new(vec![Pendulum::new()], 1).unwrap();
-        venv.reset(Some(0)).unwrap();
-        let err = sac
-            .learn_iteration(&mut venv, 1.0, &mut |_| {})
-            .unwrap_err();
-        assert!(err.to_string().contains("RescaleAction"), "{err}");
+        let err = unit_box_error(&mut sac);
+        assert!(err.contains("RescaleAction"), "{err}");
         assert_eq!(Pendulum::new().action_space().high, [2.0]);
     }
 
@@ -850,16 +763,12 @@ mod tests {
         let mut sac = Sac::new(small_config(), 3, 1, 1, 0).unwrap();
         let err = sac.train(1).unwrap_err().to_string();
         assert!(err.contains("empty replay buffer"), "{err}");
-        for i in 0..50 {
-            let x = i as f32 / 50.0;
-            sac.replay_buffer_mut()
-                .push(&[x, -x, 0.5], &[x - 0.5], x, &[x, x, 0.0], i % 7 == 0);
-        }
-        let before = snapshot(&sac.weights().unwrap());
+        fill_replay(sac.replay_buffer_mut(), 50);
+        let before = weights_of(&sac);
         let stats = sac.train(3).unwrap();
         assert_eq!(sac.n_updates(), 3);
         assert_eq!(stats[0].0, "train/actor_loss");
         assert!(stats.iter().all(|s| s.1.is_finite()), "{stats:?}");
-        assert_ne!(snapshot(&sac.weights().unwrap()), before);
+        assert_ne!(weights_of(&sac), before);
     }
 }

@@ -346,11 +346,11 @@ impl Algorithm for Td3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::off_policy::test_support::{
+        assert_training_state_resumes, assert_validate_names_keys, fill_replay, group, pendulums,
+        unit_box_error, weights_of,
+    };
     use candle_core::{DType, Device};
-    use fairgrasp_env::VecEnv;
-    use fairgrasp_env::tasks::classic::Pendulum;
-    use fairgrasp_env::wrappers::RescaleAction;
-    use std::collections::HashMap;
 
     fn small_config() -> Td3Config {
         Td3Config {
@@ -364,69 +364,18 @@ mod tests {
         }
     }
 
-    fn pendulums(n: usize, seed: u64) -> VecEnv<RescaleAction<Pendulum>> {
-        let envs = (0..n)
-            .map(|_| RescaleAction::new(Pendulum::new()).unwrap())
-            .collect();
-        let mut venv = VecEnv::new(envs, 1).unwrap();
-        venv.reset(Some(seed)).unwrap();
-        venv
-    }
-
-    /// Deep copies of the tensors of a map, by name.
-    fn snapshot(map: &TensorMap) -> HashMap<String, Vec<f32>> {
-        map.iter()
-            .map(|(k, t)| {
-                let values = t.flatten_all().unwrap().to_dtype(DType::F32).unwrap();
-                (k.clone(), values.to_vec1().unwrap())
-            })
-            .collect()
-    }
-
-    /// The tensors of `snap` whose names start with `prefix`.
-    fn group(snap: &HashMap<String, Vec<f32>>, prefix: &str) -> Vec<(String, Vec<f32>)> {
-        let mut out: Vec<_> = snap
-            .iter()
-            .filter(|(k, _)| k.starts_with(prefix))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        out.sort_by(|a, b| a.0.cmp(&b.0));
-        assert!(!out.is_empty(), "no tensors under {prefix}");
-        out
-    }
-
     /// A learner with 60 transitions in its buffer and no gradient step taken.
     fn filled(config: Td3Config, seed: u64) -> Td3 {
         let mut td3 = Td3::new(config, 3, 1, 2, seed).unwrap();
-        for i in 0..60 {
-            let x = i as f32 / 60.0;
-            td3.core
-                .buffer
-                .push(&[x, -x, 0.5], &[x - 0.5], x, &[x, x, 0.0], i % 7 == 0);
-        }
+        fill_replay(&mut td3.core.buffer, 60);
         td3
     }
 
     #[test]
     fn a_seed_fixes_the_initial_networks_and_targets_start_as_copies() {
-        let a = snapshot(
-            &Td3::new(small_config(), 3, 1, 2, 5)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
-        let b = snapshot(
-            &Td3::new(small_config(), 3, 1, 2, 5)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
-        let c = snapshot(
-            &Td3::new(small_config(), 3, 1, 2, 6)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
+        let a = weights_of(&Td3::new(small_config(), 3, 1, 2, 5).unwrap());
+        let b = weights_of(&Td3::new(small_config(), 3, 1, 2, 5).unwrap());
+        let c = weights_of(&Td3::new(small_config(), 3, 1, 2, 6).unwrap());
         assert_eq!(a, b);
         assert_ne!(a["actor.l0.weight"], c["actor.l0.weight"]);
         assert_eq!(a["actor.l2.weight"], a["actor_target.l2.weight"]);
@@ -437,12 +386,12 @@ mod tests {
     #[test]
     fn the_actor_and_the_targets_learn_every_policy_delay_critic_steps() {
         let mut td3 = filled(small_config(), 1);
-        let w0 = snapshot(&td3.weights().unwrap());
+        let w0 = weights_of(&td3);
         // Step 1: only the critics move; no actor loss is logged.
         let stats = td3.train(1).unwrap();
         let names: Vec<&str> = stats.iter().map(|s| s.0).collect();
         assert_eq!(names, ["train/critic_loss", "train/learning_rate"]);
-        let w1 = snapshot(&td3.weights().unwrap());
+        let w1 = weights_of(&td3);
         assert_ne!(group(&w1, "critic."), group(&w0, "critic."));
         for prefix in ["actor.", "actor_target.", "critic_target."] {
             assert_eq!(group(&w1, prefix), group(&w0, prefix), "{prefix} moved");
@@ -450,7 +399,7 @@ mod tests {
         // Step 2: the actor learns and both targets move towards their networks.
         let stats = td3.train(1).unwrap();
         assert_eq!(stats[0].0, "train/actor_loss");
-        let w2 = snapshot(&td3.weights().unwrap());
+        let w2 = weights_of(&td3);
         for prefix in ["actor.", "actor_target.", "critic.", "critic_target."] {
             assert_ne!(
                 group(&w2, prefix),
@@ -482,17 +431,11 @@ mod tests {
             },
             1,
         );
-        let w0 = snapshot(&td3.weights().unwrap());
+        let w0 = weights_of(&td3);
         td3.train(2).unwrap();
-        assert_eq!(
-            group(&snapshot(&td3.weights().unwrap()), "actor."),
-            group(&w0, "actor.")
-        );
+        assert_eq!(group(&weights_of(&td3), "actor."), group(&w0, "actor."));
         td3.train(1).unwrap();
-        assert_ne!(
-            group(&snapshot(&td3.weights().unwrap()), "actor."),
-            group(&w0, "actor.")
-        );
+        assert_ne!(group(&weights_of(&td3), "actor."), group(&w0, "actor."));
     }
 
     #[test]
@@ -592,56 +535,23 @@ mod tests {
         // An odd number of critic steps, so the delay's phase must carry over too.
         assert_eq!(a.n_updates() % 2, 1, "{}", a.n_updates());
         let weights = a.weights().unwrap();
-        let state = a.training_state().unwrap();
-
-        let mut b = Td3::new(small_config(), 3, 1, 2, 99).unwrap();
-        b.load_weights(&weights).unwrap();
-        b.load_training_state(&state).unwrap();
-        b.set_num_timesteps(a.num_timesteps());
-        let mut c = Td3::new(small_config(), 3, 1, 2, 99).unwrap();
-        c.load_weights(&weights).unwrap();
-        c.set_num_timesteps(a.num_timesteps());
-
-        let run = |td3: &mut Td3| {
-            let mut venv = pendulums(2, 50);
-            let stats: Vec<_> = (0..6)
-                .map(|_| td3.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap())
-                .collect();
-            let actions = td3
-                .predict(&[0.5f32, -0.3, 1.0, 0.1, 0.9, -2.0], false)
-                .unwrap();
-            (
-                stats,
-                actions,
-                snapshot(&td3.weights().unwrap()),
-                td3.n_updates(),
-            )
-        };
-        let (ra, rb, rc) = (run(&mut a), run(&mut b), run(&mut c));
-        assert!(!ra.0.iter().all(|s| s.is_empty()));
-        assert_eq!(ra, rb);
-        assert_ne!(ra.0, rc.0);
-
-        for key in [
-            "actor_opt.adam.m.actor.l0.bias",
-            "td3.rng.seed",
-            "td3.replay.actions",
-            "td3.n_updates",
-        ] {
-            let mut broken = state.clone();
-            broken.remove(key).unwrap();
-            let err = b.load_training_state(&broken).unwrap_err().to_string();
-            assert!(
-                err.contains(&key[key.find("adam").unwrap_or(0)..]),
-                "{key}: {err}"
-            );
-        }
+        assert_training_state_resumes(
+            &mut a,
+            || Td3::new(small_config(), 3, 1, 2, 99).unwrap(),
+            Td3::n_updates,
+            &[
+                "actor_opt.adam.m.actor.l0.bias",
+                "td3.rng.seed",
+                "td3.replay.actions",
+                "td3.n_updates",
+            ],
+        );
         let mut extra = weights.clone();
         extra.insert(
             "critic.qf3.l0.weight".into(),
             Tensor::zeros(1, DType::F32, &Device::Cpu).unwrap(),
         );
-        let err = b.load_weights(&extra).unwrap_err().to_string();
+        let err = a.load_weights(&extra).unwrap_err().to_string();
         assert!(err.contains("critic.qf3.l0.weight"), "{err}");
     }
 
@@ -715,25 +625,15 @@ mod tests {
                 },
             ),
         ];
-        validate(&d(), 4).unwrap();
-        for (key, config) in cases {
-            match validate(&config, 4) {
-                Err(RlError::Config { key: k, .. }) => assert_eq!(k, format!("td3.{key}")),
-                other => panic!("{key}: {other:?}"),
-            }
-        }
+        assert_validate_names_keys("td3", validate, &d(), cases);
     }
 
     #[test]
     fn environments_outside_the_unit_box_are_refused() {
         let mut td3 = Td3::new(small_config(), 3, 1, 1, 0).unwrap();
-        let mut venv = VecEnv::new(vec![Pendulum::new()], 1).unwrap();
-        venv.reset(Some(0)).unwrap();
-        let err = td3
-            .learn_iteration(&mut venv, 1.0, &mut |_| {})
-            .unwrap_err();
+        let err = unit_box_error(&mut td3);
         assert!(
-            err.to_string().contains("TD3") && err.to_string().contains("RescaleAction"),
+            err.contains("TD3") && err.contains("RescaleAction"),
             "{err}"
         );
     }
