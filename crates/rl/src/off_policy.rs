@@ -6,7 +6,7 @@
 
 use crate::algorithm::{TensorMap, rng_from_state, rng_state};
 use crate::buffers::{ReplayBuffer, ReplaySample};
-use crate::error::{Result, RlError};
+use crate::error::{ConfigSection, Result, RlError};
 use crate::nn::Adam;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
@@ -25,6 +25,38 @@ pub struct LoopSettings {
     pub batch_size: usize,
     pub utd_ratio: f32,
     pub save_replay_buffer: bool,
+}
+
+/// The [`LoopSettings`] of an algorithm's config, whose fields bear the same names.
+macro_rules! loop_settings {
+    ($config:expr) => {
+        $crate::off_policy::LoopSettings {
+            buffer_size: $config.buffer_size,
+            learning_starts: $config.learning_starts,
+            batch_size: $config.batch_size,
+            utd_ratio: $config.utd_ratio,
+            save_replay_buffer: $config.save_replay_buffer,
+        }
+    };
+}
+pub(crate) use loop_settings;
+
+/// The checks SAC and TD3 share, in their configs' order.
+pub(crate) fn check_shared_settings(
+    section: &ConfigSection,
+    learning_rate: f64,
+    settings: &LoopSettings,
+    tau: f32,
+    gamma: f32,
+) -> Result<()> {
+    section.positive("learning_rate", learning_rate)?;
+    section.at_least_one("buffer_size", settings.buffer_size)?;
+    section.at_least_one("batch_size", settings.batch_size)?;
+    if !(tau > 0.0 && tau <= 1.0) {
+        return section.bad("tau", format!("must be in (0, 1], got {tau}"));
+    }
+    section.in_unit_interval("gamma", gamma)?;
+    section.positive("utd_ratio", settings.utd_ratio)
 }
 
 /// A minibatch as tensors: `obs`, `next_obs` are `batch × obs_dim`, `actions` `batch × act_dim`,

@@ -17,9 +17,9 @@
 
 use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
 use crate::buffers::ReplayBuffer;
-use crate::error::{Result, RlError};
+use crate::error::{ConfigSection, Result, RlError};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, load_adam};
+use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::sac_policy::{SacActor, SacPolicy};
 use candle_core::{DType, Device, Var};
@@ -80,60 +80,20 @@ impl Default for SacConfig {
 }
 
 pub(crate) fn validate(c: &SacConfig, _n_envs: usize) -> Result<()> {
-    let bad = |key: &str, problem: String| {
-        Err(RlError::Config {
-            key: format!("sac.{key}"),
-            problem,
-        })
-    };
-    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
-        return bad(
-            "learning_rate",
-            format!("must be positive, got {}", c.learning_rate),
-        );
-    }
-    if c.buffer_size == 0 {
-        return bad("buffer_size", "must be at least 1".into());
-    }
-    if c.batch_size == 0 {
-        return bad("batch_size", "must be at least 1".into());
-    }
-    if !(c.tau > 0.0 && c.tau <= 1.0) {
-        return bad("tau", format!("must be in (0, 1], got {}", c.tau));
-    }
-    if !(0.0..=1.0).contains(&c.gamma) {
-        return bad("gamma", format!("must be in [0, 1], got {}", c.gamma));
-    }
-    if !(c.utd_ratio.is_finite() && c.utd_ratio > 0.0) {
-        return bad(
-            "utd_ratio",
-            format!("must be positive, got {}", c.utd_ratio),
-        );
-    }
-    if let Some(v) = c.ent_coef
-        && !(v.is_finite() && v >= 0.0)
-    {
-        return bad("ent_coef", format!("must be non-negative, got {v}"));
+    let section = ConfigSection("sac");
+    let settings = loop_settings!(c);
+    check_shared_settings(&section, c.learning_rate, &settings, c.tau, c.gamma)?;
+    if let Some(v) = c.ent_coef {
+        section.non_negative("ent_coef", v)?;
     }
     // Taken as a logarithm, so it must be positive even where a fixed `ent_coef` overrides it.
-    if !(c.ent_coef_init.is_finite() && c.ent_coef_init > 0.0) {
-        return bad(
-            "ent_coef_init",
-            format!("must be positive, got {}", c.ent_coef_init),
-        );
-    }
+    section.positive("ent_coef_init", c.ent_coef_init)?;
     if let Some(v) = c.target_entropy
         && !v.is_finite()
     {
-        return bad("target_entropy", format!("must be finite, got {v}"));
+        return section.bad("target_entropy", format!("must be finite, got {v}"));
     }
-    if c.net_arch.is_empty() || c.net_arch.contains(&0) {
-        return bad(
-            "net_arch",
-            "needs at least one hidden layer, all of positive width".into(),
-        );
-    }
-    Ok(())
+    section.net_arch(&c.net_arch)
 }
 
 /// Every network of the learner: the policy's and log α. Variable names carry their group's
@@ -244,14 +204,7 @@ impl Sac {
         seed: u64,
     ) -> Result<Self> {
         validate(&config, n_envs)?;
-        let settings = LoopSettings {
-            buffer_size: config.buffer_size,
-            learning_starts: config.learning_starts,
-            batch_size: config.batch_size,
-            utd_ratio: config.utd_ratio,
-            save_replay_buffer: config.save_replay_buffer,
-        };
-        let mut core = OffPolicyCore::new("sac", settings, obs_dim, act_dim, seed)?;
+        let mut core = OffPolicyCore::new("sac", loop_settings!(config), obs_dim, act_dim, seed)?;
         let nets = Networks::zeroed(obs_dim, act_dim, &config)?;
         nets.policy.init_weights(&mut core.rng)?;
         let lr = config.learning_rate;

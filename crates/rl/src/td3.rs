@@ -14,9 +14,9 @@
 //! `d` is termination only: a truncated episode is bootstrapped from its real last observation.
 
 use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
-use crate::error::{Result, RlError};
+use crate::error::{ConfigSection, Result};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, load_adam};
+use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::td3_policy::{Td3Actor, Td3Policy};
 use candle_core::Tensor;
@@ -79,55 +79,14 @@ impl Default for Td3Config {
 }
 
 pub(crate) fn validate(c: &Td3Config, _n_envs: usize) -> Result<()> {
-    let bad = |key: &str, problem: String| {
-        Err(RlError::Config {
-            key: format!("td3.{key}"),
-            problem,
-        })
-    };
-    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
-        return bad(
-            "learning_rate",
-            format!("must be positive, got {}", c.learning_rate),
-        );
-    }
-    if c.buffer_size == 0 {
-        return bad("buffer_size", "must be at least 1".into());
-    }
-    if c.batch_size == 0 {
-        return bad("batch_size", "must be at least 1".into());
-    }
-    if !(c.tau > 0.0 && c.tau <= 1.0) {
-        return bad("tau", format!("must be in (0, 1], got {}", c.tau));
-    }
-    if !(0.0..=1.0).contains(&c.gamma) {
-        return bad("gamma", format!("must be in [0, 1], got {}", c.gamma));
-    }
-    if !(c.utd_ratio.is_finite() && c.utd_ratio > 0.0) {
-        return bad(
-            "utd_ratio",
-            format!("must be positive, got {}", c.utd_ratio),
-        );
-    }
-    if c.policy_delay == 0 {
-        return bad("policy_delay", "must be at least 1".into());
-    }
-    for (key, v) in [
-        ("target_policy_noise", c.target_policy_noise),
-        ("target_noise_clip", c.target_noise_clip),
-        ("action_noise", c.action_noise),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return bad(key, format!("must be non-negative, got {v}"));
-        }
-    }
-    if c.net_arch.is_empty() || c.net_arch.contains(&0) {
-        return bad(
-            "net_arch",
-            "needs at least one hidden layer, all of positive width".into(),
-        );
-    }
-    Ok(())
+    let section = ConfigSection("td3");
+    let settings = loop_settings!(c);
+    check_shared_settings(&section, c.learning_rate, &settings, c.tau, c.gamma)?;
+    section.at_least_one("policy_delay", c.policy_delay as usize)?;
+    section.non_negative("target_policy_noise", c.target_policy_noise)?;
+    section.non_negative("target_noise_clip", c.target_noise_clip)?;
+    section.non_negative("action_noise", c.action_noise)?;
+    section.net_arch(&c.net_arch)
 }
 
 /// Weights of a TD3 model without a learner (for [`crate::policies::Policy`]): builds the
@@ -163,14 +122,7 @@ impl Td3 {
         seed: u64,
     ) -> Result<Self> {
         validate(&config, n_envs)?;
-        let settings = LoopSettings {
-            buffer_size: config.buffer_size,
-            learning_starts: config.learning_starts,
-            batch_size: config.batch_size,
-            utd_ratio: config.utd_ratio,
-            save_replay_buffer: config.save_replay_buffer,
-        };
-        let mut core = OffPolicyCore::new("td3", settings, obs_dim, act_dim, seed)?;
+        let mut core = OffPolicyCore::new("td3", loop_settings!(config), obs_dim, act_dim, seed)?;
         let policy = Td3Policy::zeroed(obs_dim, act_dim, &config)?;
         policy.init_weights(&mut core.rng)?;
         let lr = config.learning_rate;
