@@ -6,11 +6,16 @@
 
 use crate::algorithm::{TensorMap, rng_from_state, rng_state};
 use crate::buffers::{ReplayBuffer, ReplaySample};
-use crate::error::{Result, RlError};
+use crate::error::{ConfigSection, Result, RlError};
+use crate::nn::Adam;
 use candle_core::{DType, Device, Tensor};
+use candle_nn::VarMap;
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+
+#[cfg(test)]
+pub(crate) mod test_support;
 
 /// The settings of the learn loop (each algorithm's config has them under SB3's names).
 #[derive(Clone, Copy, Debug)]
@@ -20,6 +25,38 @@ pub struct LoopSettings {
     pub batch_size: usize,
     pub utd_ratio: f32,
     pub save_replay_buffer: bool,
+}
+
+/// The [`LoopSettings`] of an algorithm's config, whose fields bear the same names.
+macro_rules! loop_settings {
+    ($config:expr) => {
+        $crate::off_policy::LoopSettings {
+            buffer_size: $config.buffer_size,
+            learning_starts: $config.learning_starts,
+            batch_size: $config.batch_size,
+            utd_ratio: $config.utd_ratio,
+            save_replay_buffer: $config.save_replay_buffer,
+        }
+    };
+}
+pub(crate) use loop_settings;
+
+/// The checks SAC and TD3 share, in their configs' order.
+pub(crate) fn check_shared_settings(
+    section: &ConfigSection,
+    learning_rate: f64,
+    settings: &LoopSettings,
+    tau: f32,
+    gamma: f32,
+) -> Result<()> {
+    section.positive("learning_rate", learning_rate)?;
+    section.at_least_one("buffer_size", settings.buffer_size)?;
+    section.at_least_one("batch_size", settings.batch_size)?;
+    if !(tau > 0.0 && tau <= 1.0) {
+        return section.bad("tau", format!("must be in (0, 1], got {tau}"));
+    }
+    section.in_unit_interval("gamma", gamma)?;
+    section.positive("utd_ratio", settings.utd_ratio)
 }
 
 /// A minibatch as tensors: `obs`, `next_obs` are `batch × obs_dim`, `actions` `batch × act_dim`,
@@ -198,6 +235,21 @@ impl OffPolicyCore {
         Ok(state)
     }
 
+    /// The optimisers' states, each under its prefix (`actor_opt.adam.m.…`), with
+    /// [`Self::state`]: an algorithm's whole training state.
+    pub fn training_state(&self, optimizers: &[(&str, &Adam)]) -> Result<TensorMap> {
+        let mut state = TensorMap::new();
+        for (prefix, opt) in optimizers {
+            state.extend(
+                opt.state()?
+                    .into_iter()
+                    .map(|(k, v)| (format!("{prefix}{k}"), v)),
+            );
+        }
+        state.extend(self.state()?);
+        Ok(state)
+    }
+
     /// Reads the counters and stream of a state saved by [`Self::state`] without changing
     /// anything; [`Restored::apply`] puts them and the buffer in place (so an algorithm can
     /// check its own parts first).
@@ -238,6 +290,15 @@ impl Restored {
         core.n_updates = self.n_updates;
         Ok(())
     }
+}
+
+/// A new optimiser of `varmap` with the moments saved under `prefix` in `state` (by
+/// [`OffPolicyCore::training_state`]); an error names what is missing and the prefix.
+pub fn load_adam(state: &TensorMap, prefix: &str, varmap: &VarMap, lr: f64) -> Result<Adam> {
+    let mut opt = Adam::new(varmap, lr)?;
+    opt.load_state(&unprefixed(state, prefix))
+        .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
+    Ok(opt)
 }
 
 /// The entries of `state` under `prefix`, without it.

@@ -10,7 +10,7 @@ use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
 };
 use crate::buffers::RolloutBuffer;
-use crate::error::{Result, RlError};
+use crate::error::{ConfigSection, Result, RlError};
 use crate::kernels::ppo_loss::{FusedPpoLoss, Minibatch, MinibatchStats};
 use crate::nn::{Activation, Adam};
 use crate::policies::actor_critic::ActorCritic;
@@ -468,23 +468,11 @@ pub fn explained_variance(values: &[f32], returns: &[f32]) -> f32 {
 }
 
 pub(crate) fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
-    let bad = |key: &str, problem: String| {
-        Err(RlError::Config {
-            key: format!("ppo.{key}"),
-            problem,
-        })
-    };
-    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
-        return bad(
-            "learning_rate",
-            format!("must be positive, got {}", c.learning_rate),
-        );
-    }
-    if c.n_steps == 0 {
-        return bad("n_steps", "must be at least 1".into());
-    }
+    let section = ConfigSection("ppo");
+    section.positive("learning_rate", c.learning_rate)?;
+    section.at_least_one("n_steps", c.n_steps)?;
     if c.batch_size == 0 || c.batch_size > c.n_steps * n_envs {
-        return bad(
+        return section.bad(
             "batch_size",
             format!(
                 "must be in 1..={} (n_steps × n_envs), got {}",
@@ -493,30 +481,16 @@ pub(crate) fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
             ),
         );
     }
-    if c.n_epochs == 0 {
-        return bad("n_epochs", "must be at least 1".into());
-    }
-    for (key, v) in [("gamma", c.gamma), ("gae_lambda", c.gae_lambda)] {
-        if !(0.0..=1.0).contains(&v) {
-            return bad(key, format!("must be in [0, 1], got {v}"));
-        }
-    }
+    section.at_least_one("n_epochs", c.n_epochs)?;
+    section.in_unit_interval("gamma", c.gamma)?;
+    section.in_unit_interval("gae_lambda", c.gae_lambda)?;
     if !(c.clip_range > 0.0 && c.clip_range < 1.0) {
-        return bad(
+        return section.bad(
             "clip_range",
             format!("must be in (0, 1), got {}", c.clip_range),
         );
     }
-    if c.net_arch.is_empty() || c.net_arch.contains(&0) {
-        return bad(
-            "net_arch",
-            "needs at least one hidden layer, all of positive width".into(),
-        );
-    }
-    for (key, v) in [("ent_coef", c.ent_coef), ("vf_coef", c.vf_coef)] {
-        if !(v.is_finite() && v >= 0.0) {
-            return bad(key, format!("must be non-negative, got {v}"));
-        }
-    }
-    Ok(())
+    section.net_arch(&c.net_arch)?;
+    section.non_negative("ent_coef", c.ent_coef)?;
+    section.non_negative("vf_coef", c.vf_coef)
 }

@@ -14,13 +14,12 @@
 //! `d` is termination only: a truncated episode is bootstrapped from its real last observation.
 
 use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
-use crate::error::{Result, RlError};
+use crate::error::{ConfigSection, Result};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, LoopSettings, OffPolicyCore, unprefixed};
+use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::td3_policy::{Td3Actor, Td3Policy};
 use candle_core::Tensor;
-use candle_nn::VarMap;
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -80,55 +79,14 @@ impl Default for Td3Config {
 }
 
 pub(crate) fn validate(c: &Td3Config, _n_envs: usize) -> Result<()> {
-    let bad = |key: &str, problem: String| {
-        Err(RlError::Config {
-            key: format!("td3.{key}"),
-            problem,
-        })
-    };
-    if !(c.learning_rate.is_finite() && c.learning_rate > 0.0) {
-        return bad(
-            "learning_rate",
-            format!("must be positive, got {}", c.learning_rate),
-        );
-    }
-    if c.buffer_size == 0 {
-        return bad("buffer_size", "must be at least 1".into());
-    }
-    if c.batch_size == 0 {
-        return bad("batch_size", "must be at least 1".into());
-    }
-    if !(c.tau > 0.0 && c.tau <= 1.0) {
-        return bad("tau", format!("must be in (0, 1], got {}", c.tau));
-    }
-    if !(0.0..=1.0).contains(&c.gamma) {
-        return bad("gamma", format!("must be in [0, 1], got {}", c.gamma));
-    }
-    if !(c.utd_ratio.is_finite() && c.utd_ratio > 0.0) {
-        return bad(
-            "utd_ratio",
-            format!("must be positive, got {}", c.utd_ratio),
-        );
-    }
-    if c.policy_delay == 0 {
-        return bad("policy_delay", "must be at least 1".into());
-    }
-    for (key, v) in [
-        ("target_policy_noise", c.target_policy_noise),
-        ("target_noise_clip", c.target_noise_clip),
-        ("action_noise", c.action_noise),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return bad(key, format!("must be non-negative, got {v}"));
-        }
-    }
-    if c.net_arch.is_empty() || c.net_arch.contains(&0) {
-        return bad(
-            "net_arch",
-            "needs at least one hidden layer, all of positive width".into(),
-        );
-    }
-    Ok(())
+    let section = ConfigSection("td3");
+    let settings = loop_settings!(c);
+    check_shared_settings(&section, c.learning_rate, &settings, c.tau, c.gamma)?;
+    section.at_least_one("policy_delay", c.policy_delay as usize)?;
+    section.non_negative("target_policy_noise", c.target_policy_noise)?;
+    section.non_negative("target_noise_clip", c.target_noise_clip)?;
+    section.non_negative("action_noise", c.action_noise)?;
+    section.net_arch(&c.net_arch)
 }
 
 /// Weights of a TD3 model without a learner (for [`crate::policies::Policy`]): builds the
@@ -164,20 +122,13 @@ impl Td3 {
         seed: u64,
     ) -> Result<Self> {
         validate(&config, n_envs)?;
-        let settings = LoopSettings {
-            buffer_size: config.buffer_size,
-            learning_starts: config.learning_starts,
-            batch_size: config.batch_size,
-            utd_ratio: config.utd_ratio,
-            save_replay_buffer: config.save_replay_buffer,
-        };
-        let mut core = OffPolicyCore::new("td3", settings, obs_dim, act_dim, seed)?;
+        let mut core = OffPolicyCore::new("td3", loop_settings!(config), obs_dim, act_dim, seed)?;
         let policy = Td3Policy::zeroed(obs_dim, act_dim, &config)?;
         policy.init_weights(&mut core.rng)?;
         let lr = config.learning_rate;
         Ok(Self {
             actor_opt: Adam::new(&policy.actor.varmap, lr)?,
-            critic_opt: Adam::new(&policy.critic.varmap, lr)?,
+            critic_opt: Adam::new(&policy.critics.online.varmap, lr)?,
             policy,
             core,
             config,
@@ -243,10 +194,10 @@ impl Td3 {
         let eps = self.core.noise(b)?;
         let next_actions = self.smoothed_target_actions(&next_obs, &eps)?;
         let policy = &self.policy;
-        let next_q = policy.critic_target.min_q(&next_obs, &next_actions)?;
+        let next_q = policy.critics.target.min_q(&next_obs, &next_actions)?;
         let target = (rewards + ((not_done * next_q)? * self.config.gamma as f64)?)?.detach();
 
-        let (q1, q2) = policy.critic.q(&obs, &actions)?;
+        let (q1, q2) = policy.critics.online.q(&obs, &actions)?;
         let critic_loss =
             ((q1 - &target)?.sqr()?.mean_all()? + (q2 - &target)?.sqr()?.mean_all()?)?;
         self.critic_opt.backward_step(&critic_loss, 0.0)?;
@@ -260,7 +211,8 @@ impl Td3 {
         {
             // Deterministic policy gradient through the first critic, its weights constant.
             let loss = policy
-                .critic
+                .critics
+                .online
                 .q1_detached(&obs, &policy.actor.forward(&obs)?)?
                 .mean_all()?
                 .neg()?;
@@ -321,32 +273,17 @@ impl Algorithm for Td3 {
     }
 
     fn training_state(&self) -> Result<TensorMap> {
-        let mut state = TensorMap::new();
-        for (prefix, opt) in [
+        self.core.training_state(&[
             ("actor_opt.", &self.actor_opt),
             ("critic_opt.", &self.critic_opt),
-        ] {
-            state.extend(
-                opt.state()?
-                    .into_iter()
-                    .map(|(k, v)| (format!("{prefix}{k}"), v)),
-            );
-        }
-        state.extend(self.core.state()?);
-        Ok(state)
+        ])
     }
 
     fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
         // Everything is read into new values first, so a bad state changes nothing.
         let lr = self.config.learning_rate;
-        let load_opt = |varmap: &VarMap, prefix: &str| -> Result<Adam> {
-            let mut opt = Adam::new(varmap, lr)?;
-            opt.load_state(&unprefixed(state, prefix))
-                .map_err(|e| RlError::Model(format!("{e} (under `{prefix}`)")))?;
-            Ok(opt)
-        };
-        let actor_opt = load_opt(&self.policy.actor.varmap, "actor_opt.")?;
-        let critic_opt = load_opt(&self.policy.critic.varmap, "critic_opt.")?;
+        let actor_opt = load_adam(state, "actor_opt.", &self.policy.actor.varmap, lr)?;
+        let critic_opt = load_adam(state, "critic_opt.", &self.policy.critics.online.varmap, lr)?;
         self.core.read_state(state)?.apply(&mut self.core, state)?;
         self.actor_opt = actor_opt;
         self.critic_opt = critic_opt;
@@ -361,11 +298,11 @@ impl Algorithm for Td3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::off_policy::test_support::{
+        assert_training_state_resumes, assert_validate_names_keys, fill_replay, group, pendulums,
+        unit_box_error, weights_of,
+    };
     use candle_core::{DType, Device};
-    use fairgrasp_env::VecEnv;
-    use fairgrasp_env::tasks::classic::Pendulum;
-    use fairgrasp_env::wrappers::RescaleAction;
-    use std::collections::HashMap;
 
     fn small_config() -> Td3Config {
         Td3Config {
@@ -379,69 +316,18 @@ mod tests {
         }
     }
 
-    fn pendulums(n: usize, seed: u64) -> VecEnv<RescaleAction<Pendulum>> {
-        let envs = (0..n)
-            .map(|_| RescaleAction::new(Pendulum::new()).unwrap())
-            .collect();
-        let mut venv = VecEnv::new(envs, 1).unwrap();
-        venv.reset(Some(seed)).unwrap();
-        venv
-    }
-
-    /// Deep copies of the tensors of a map, by name.
-    fn snapshot(map: &TensorMap) -> HashMap<String, Vec<f32>> {
-        map.iter()
-            .map(|(k, t)| {
-                let values = t.flatten_all().unwrap().to_dtype(DType::F32).unwrap();
-                (k.clone(), values.to_vec1().unwrap())
-            })
-            .collect()
-    }
-
-    /// The tensors of `snap` whose names start with `prefix`.
-    fn group(snap: &HashMap<String, Vec<f32>>, prefix: &str) -> Vec<(String, Vec<f32>)> {
-        let mut out: Vec<_> = snap
-            .iter()
-            .filter(|(k, _)| k.starts_with(prefix))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        out.sort_by(|a, b| a.0.cmp(&b.0));
-        assert!(!out.is_empty(), "no tensors under {prefix}");
-        out
-    }
-
     /// A learner with 60 transitions in its buffer and no gradient step taken.
     fn filled(config: Td3Config, seed: u64) -> Td3 {
         let mut td3 = Td3::new(config, 3, 1, 2, seed).unwrap();
-        for i in 0..60 {
-            let x = i as f32 / 60.0;
-            td3.core
-                .buffer
-                .push(&[x, -x, 0.5], &[x - 0.5], x, &[x, x, 0.0], i % 7 == 0);
-        }
+        fill_replay(&mut td3.core.buffer, 60);
         td3
     }
 
     #[test]
     fn a_seed_fixes_the_initial_networks_and_targets_start_as_copies() {
-        let a = snapshot(
-            &Td3::new(small_config(), 3, 1, 2, 5)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
-        let b = snapshot(
-            &Td3::new(small_config(), 3, 1, 2, 5)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
-        let c = snapshot(
-            &Td3::new(small_config(), 3, 1, 2, 6)
-                .unwrap()
-                .weights()
-                .unwrap(),
-        );
+        let a = weights_of(&Td3::new(small_config(), 3, 1, 2, 5).unwrap());
+        let b = weights_of(&Td3::new(small_config(), 3, 1, 2, 5).unwrap());
+        let c = weights_of(&Td3::new(small_config(), 3, 1, 2, 6).unwrap());
         assert_eq!(a, b);
         assert_ne!(a["actor.l0.weight"], c["actor.l0.weight"]);
         assert_eq!(a["actor.l2.weight"], a["actor_target.l2.weight"]);
@@ -452,12 +338,12 @@ mod tests {
     #[test]
     fn the_actor_and_the_targets_learn_every_policy_delay_critic_steps() {
         let mut td3 = filled(small_config(), 1);
-        let w0 = snapshot(&td3.weights().unwrap());
+        let w0 = weights_of(&td3);
         // Step 1: only the critics move; no actor loss is logged.
         let stats = td3.train(1).unwrap();
         let names: Vec<&str> = stats.iter().map(|s| s.0).collect();
         assert_eq!(names, ["train/critic_loss", "train/learning_rate"]);
-        let w1 = snapshot(&td3.weights().unwrap());
+        let w1 = weights_of(&td3);
         assert_ne!(group(&w1, "critic."), group(&w0, "critic."));
         for prefix in ["actor.", "actor_target.", "critic_target."] {
             assert_eq!(group(&w1, prefix), group(&w0, prefix), "{prefix} moved");
@@ -465,7 +351,7 @@ mod tests {
         // Step 2: the actor learns and both targets move towards their networks.
         let stats = td3.train(1).unwrap();
         assert_eq!(stats[0].0, "train/actor_loss");
-        let w2 = snapshot(&td3.weights().unwrap());
+        let w2 = weights_of(&td3);
         for prefix in ["actor.", "actor_target.", "critic.", "critic_target."] {
             assert_ne!(
                 group(&w2, prefix),
@@ -497,17 +383,11 @@ mod tests {
             },
             1,
         );
-        let w0 = snapshot(&td3.weights().unwrap());
+        let w0 = weights_of(&td3);
         td3.train(2).unwrap();
-        assert_eq!(
-            group(&snapshot(&td3.weights().unwrap()), "actor."),
-            group(&w0, "actor.")
-        );
+        assert_eq!(group(&weights_of(&td3), "actor."), group(&w0, "actor."));
         td3.train(1).unwrap();
-        assert_ne!(
-            group(&snapshot(&td3.weights().unwrap()), "actor."),
-            group(&w0, "actor.")
-        );
+        assert_ne!(group(&weights_of(&td3), "actor."), group(&w0, "actor."));
     }
 
     #[test]
@@ -607,56 +487,23 @@ mod tests {
         // An odd number of critic steps, so the delay's phase must carry over too.
         assert_eq!(a.n_updates() % 2, 1, "{}", a.n_updates());
         let weights = a.weights().unwrap();
-        let state = a.training_state().unwrap();
-
-        let mut b = Td3::new(small_config(), 3, 1, 2, 99).unwrap();
-        b.load_weights(&weights).unwrap();
-        b.load_training_state(&state).unwrap();
-        b.set_num_timesteps(a.num_timesteps());
-        let mut c = Td3::new(small_config(), 3, 1, 2, 99).unwrap();
-        c.load_weights(&weights).unwrap();
-        c.set_num_timesteps(a.num_timesteps());
-
-        let run = |td3: &mut Td3| {
-            let mut venv = pendulums(2, 50);
-            let stats: Vec<_> = (0..6)
-                .map(|_| td3.learn_iteration(&mut venv, 1.0, &mut |_| {}).unwrap())
-                .collect();
-            let actions = td3
-                .predict(&[0.5f32, -0.3, 1.0, 0.1, 0.9, -2.0], false)
-                .unwrap();
-            (
-                stats,
-                actions,
-                snapshot(&td3.weights().unwrap()),
-                td3.n_updates(),
-            )
-        };
-        let (ra, rb, rc) = (run(&mut a), run(&mut b), run(&mut c));
-        assert!(!ra.0.iter().all(|s| s.is_empty()));
-        assert_eq!(ra, rb);
-        assert_ne!(ra.0, rc.0);
-
-        for key in [
-            "actor_opt.adam.m.actor.l0.bias",
-            "td3.rng.seed",
-            "td3.replay.actions",
-            "td3.n_updates",
-        ] {
-            let mut broken = state.clone();
-            broken.remove(key).unwrap();
-            let err = b.load_training_state(&broken).unwrap_err().to_string();
-            assert!(
-                err.contains(&key[key.find("adam").unwrap_or(0)..]),
-                "{key}: {err}"
-            );
-        }
+        assert_training_state_resumes(
+            &mut a,
+            || Td3::new(small_config(), 3, 1, 2, 99).unwrap(),
+            Td3::n_updates,
+            &[
+                "actor_opt.adam.m.actor.l0.bias",
+                "td3.rng.seed",
+                "td3.replay.actions",
+                "td3.n_updates",
+            ],
+        );
         let mut extra = weights.clone();
         extra.insert(
             "critic.qf3.l0.weight".into(),
             Tensor::zeros(1, DType::F32, &Device::Cpu).unwrap(),
         );
-        let err = b.load_weights(&extra).unwrap_err().to_string();
+        let err = a.load_weights(&extra).unwrap_err().to_string();
         assert!(err.contains("critic.qf3.l0.weight"), "{err}");
     }
 
@@ -730,25 +577,15 @@ mod tests {
                 },
             ),
         ];
-        validate(&d(), 4).unwrap();
-        for (key, config) in cases {
-            match validate(&config, 4) {
-                Err(RlError::Config { key: k, .. }) => assert_eq!(k, format!("td3.{key}")),
-                other => panic!("{key}: {other:?}"),
-            }
-        }
+        assert_validate_names_keys("td3", validate, &d(), cases);
     }
 
     #[test]
     fn environments_outside_the_unit_box_are_refused() {
         let mut td3 = Td3::new(small_config(), 3, 1, 1, 0).unwrap();
-        let mut venv = VecEnv::new(vec![Pendulum::new()], 1).unwrap();
-        venv.reset(Some(0)).unwrap();
-        let err = td3
-            .learn_iteration(&mut venv, 1.0, &mut |_| {})
-            .unwrap_err();
+        let err = unit_box_error(&mut td3);
         assert!(
-            err.to_string().contains("TD3") && err.to_string().contains("RescaleAction"),
+            err.contains("TD3") && err.contains("RescaleAction"),
             "{err}"
         );
     }

@@ -1,6 +1,9 @@
 //! The algorithms learn classic-control tasks within a bounded number of steps (small enough for
 //! CI; the long versions are benchmarks).
 
+mod common;
+
+use common::mean_return;
 use fairgrasp_env::tasks::classic::PointReach;
 use fairgrasp_env::{Env, VecEnv, VectorEnv};
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
@@ -9,23 +12,13 @@ use rand::SeedableRng;
 /// Mean deterministic return of the PPO policy over `episodes` PointReach episodes.
 fn evaluate(ppo: &Ppo, episodes: u64) -> f32 {
     let mut env = PointReach::new();
+    let space = env.action_space().clone();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    let mut total = 0.0;
-    for e in 0..episodes {
-        let (mut obs, _) = env.reset(Some(10_000 + e)).unwrap();
-        loop {
-            let out = ppo.policy.act(&obs, true, &mut rng).unwrap();
-            let mut action = out.actions;
-            env.action_space().clip(&mut action);
-            let step = env.step(&action).unwrap();
-            total += step.reward;
-            obs = step.obs;
-            if step.terminated || step.truncated {
-                break;
-            }
-        }
-    }
-    total / episodes as f32
+    mean_return(&mut env, episodes, |obs| {
+        let mut action = ppo.policy.act(obs, true, &mut rng).unwrap().actions;
+        space.clip(&mut action);
+        action
+    })
 }
 
 #[test]

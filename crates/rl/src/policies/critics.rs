@@ -11,26 +11,53 @@ use rand::Rng;
 /// Output-layer gain of the critics (see [`Mlp::new`]).
 const CRITIC_OUTPUT_GAIN: f64 = 1.0;
 
-/// Online twin critics named `critic.…`, their target copy named `critic_target.…`, and the
-/// pairs the Polyak update walks: what SAC and TD3 build alike.
+/// Online twin critics named `critic.…`, their Polyak-averaged target copy named
+/// `critic_target.…`, and the pairs the update walks: what SAC and TD3 build alike.
+pub struct CriticsWithTarget {
+    pub online: TwinCritics,
+    pub target: TwinCritics,
+    pub(crate) pairs: TargetPairs,
+}
+
+/// The critics and their target with zero weights (see [`CriticsWithTarget::init_weights`]).
 pub fn critics_with_target(
     obs_dim: usize,
     act_dim: usize,
     net_arch: &[usize],
     activation: Activation,
     features: &FeaturesConfig,
-) -> Result<(TwinCritics, TwinCritics, TargetPairs)> {
+) -> Result<CriticsWithTarget> {
     let critics = |prefix: &str| {
         TwinCritics::zeroed(prefix, obs_dim, act_dim, net_arch, activation, features)
     };
-    let (critic, critic_target) = (critics("critic")?, critics("critic_target")?);
-    let pairs = TargetPairs::new(
-        &critic.varmap,
-        "critic.",
-        &critic_target.varmap,
-        "critic_target.",
-    )?;
-    Ok((critic, critic_target, pairs))
+    let (online, target) = (critics("critic")?, critics("critic_target")?);
+    let pairs = TargetPairs::new(&online.varmap, "critic.", &target.varmap, "critic_target.")?;
+    Ok(CriticsWithTarget {
+        online,
+        target,
+        pairs,
+    })
+}
+
+impl CriticsWithTarget {
+    /// The two groups of variables with their name prefixes, online first.
+    pub fn groups(&self) -> [(&'static str, &VarMap); 2] {
+        [
+            ("critic.", &self.online.varmap),
+            ("critic_target.", &self.target.varmap),
+        ]
+    }
+
+    /// Draws the online critics' weights from `rng` and copies them to the target.
+    pub fn init_weights(&self, rng: &mut impl Rng) -> Result<()> {
+        self.online.init_weights(rng)?;
+        self.pairs.copy()
+    }
+
+    /// Polyak averaging of the target: `target ← (1 − τ) target + τ online`.
+    pub fn soft_update(&self, tau: f32) -> Result<()> {
+        self.pairs.soft_update(tau)
+    }
 }
 
 /// Twin Q networks (Fujimoto et al. 2018: the minimum of two critics curbs the overestimation

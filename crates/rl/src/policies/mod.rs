@@ -17,7 +17,7 @@ pub mod sac_policy;
 pub mod td3_policy;
 
 pub use actor_critic::{ActorCritic, PolicyOutput};
-pub use critics::{TargetPairs, TwinCritics};
+pub use critics::{CriticsWithTarget, TargetPairs, TwinCritics};
 pub use features::{FeaturesConfig, FeaturesExtractor, FlattenExtractor};
 pub use policy::Policy;
 pub use sac_policy::{SacActor, SacPolicy};

@@ -1,5 +1,5 @@
-//! SAC's networks (SB3's `SACPolicy`): a tanh-squashed Gaussian actor and twin critics
-//! ([`TwinCritics`]) with their Polyak-averaged targets. Each has its own feature extractor
+//! SAC's networks (SB3's `SACPolicy`): a tanh-squashed Gaussian actor and twin critics with
+//! their Polyak-averaged targets ([`CriticsWithTarget`]). Each has its own feature extractor
 //! (SB3's default for off-policy algorithms); the two Q networks of a critic share theirs.
 //!
 //! Parameters: `actor.*`, `critic.qf1.*`, `critic.qf2.*`, `critic_target.*` (and
@@ -9,7 +9,7 @@ use crate::distributions::{SquashedDiagGaussian, standard_normal_tensor};
 use crate::error::Result;
 use crate::nn::Mlp;
 use crate::policies::actor_critic::obs_tensor;
-use crate::policies::critics::{TargetPairs, TwinCritics, critics_with_target};
+use crate::policies::critics::{CriticsWithTarget, critics_with_target};
 use crate::policies::features::FeaturesExtractor;
 use crate::sac::SacConfig;
 use candle_core::{DType, Device, Tensor};
@@ -101,50 +101,38 @@ impl SacActor {
 /// The actor, the critics and the target critics.
 pub struct SacPolicy {
     pub actor: SacActor,
-    pub critic: TwinCritics,
-    pub critic_target: TwinCritics,
-    /// Critic and target variables, for the Polyak update.
-    pub(crate) critic_pairs: TargetPairs,
+    pub critics: CriticsWithTarget,
 }
 
 impl SacPolicy {
     /// The networks with zero weights (see [`Self::init_weights`]).
     pub fn zeroed(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
         let actor = SacActor::zeroed(obs_dim, act_dim, config)?;
-        let (critic, critic_target, critic_pairs) = critics_with_target(
+        let critics = critics_with_target(
             obs_dim,
             act_dim,
             &config.net_arch,
             config.activation,
             &config.features,
         )?;
-        Ok(Self {
-            actor,
-            critic,
-            critic_target,
-            critic_pairs,
-        })
+        Ok(Self { actor, critics })
     }
 
     /// The groups of variables with their name prefixes, in a fixed order.
     pub fn groups(&self) -> [(&'static str, &VarMap); 3] {
-        [
-            ("actor.", &self.actor.varmap),
-            ("critic.", &self.critic.varmap),
-            ("critic_target.", &self.critic_target.varmap),
-        ]
+        let [critic, critic_target] = self.critics.groups();
+        [("actor.", &self.actor.varmap), critic, critic_target]
     }
 
     /// Draws the actor's and critics' weights from `rng` and copies the critics to the targets.
     pub fn init_weights(&self, rng: &mut impl Rng) -> Result<()> {
         self.actor.init_weights(rng)?;
-        self.critic.init_weights(rng)?;
-        self.critic_pairs.copy()
+        self.critics.init_weights(rng)
     }
 
     /// Polyak averaging of the target critics: `target ← (1 − τ) target + τ online`.
     pub fn soft_update(&self, tau: f32) -> Result<()> {
-        self.critic_pairs.soft_update(tau)
+        self.critics.soft_update(tau)
     }
 }
 

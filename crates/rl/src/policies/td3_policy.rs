@@ -1,12 +1,12 @@
 //! TD3's networks (SB3's `TD3Policy`): a deterministic tanh actor, twin critics
-//! ([`TwinCritics`]), and Polyak-averaged targets of both.
+//! ([`CriticsWithTarget`]), and Polyak-averaged targets of both.
 //!
 //! Parameters: `actor.*`, `actor_target.*`, `critic.qf1.*`, `critic.qf2.*`, `critic_target.*`.
 
 use crate::error::Result;
 use crate::nn::Mlp;
 use crate::policies::actor_critic::obs_tensor;
-use crate::policies::critics::{TargetPairs, TwinCritics, critics_with_target};
+use crate::policies::critics::{CriticsWithTarget, TargetPairs, critics_with_target};
 use crate::policies::features::FeaturesExtractor;
 use crate::td3::Td3Config;
 use candle_core::{DType, Device, Tensor};
@@ -93,10 +93,8 @@ impl Td3Actor {
 pub struct Td3Policy {
     pub actor: Td3Actor,
     pub actor_target: Td3Actor,
-    pub critic: TwinCritics,
-    pub critic_target: TwinCritics,
+    pub critics: CriticsWithTarget,
     pub(crate) actor_pairs: TargetPairs,
-    pub(crate) critic_pairs: TargetPairs,
 }
 
 impl Td3Policy {
@@ -104,7 +102,7 @@ impl Td3Policy {
     pub fn zeroed(obs_dim: usize, act_dim: usize, config: &Td3Config) -> Result<Self> {
         let actor = Td3Actor::zeroed("actor", obs_dim, act_dim, config)?;
         let actor_target = Td3Actor::zeroed("actor_target", obs_dim, act_dim, config)?;
-        let (critic, critic_target, critic_pairs) = critics_with_target(
+        let critics = critics_with_target(
             obs_dim,
             act_dim,
             &config.net_arch,
@@ -118,35 +116,34 @@ impl Td3Policy {
                 &actor_target.varmap,
                 "actor_target.",
             )?,
-            critic_pairs,
             actor,
             actor_target,
-            critic,
-            critic_target,
+            critics,
         })
     }
 
     /// The groups of variables with their name prefixes, in a fixed order.
     pub fn groups(&self) -> [(&'static str, &VarMap); 4] {
+        let [critic, critic_target] = self.critics.groups();
         [
             ("actor.", &self.actor.varmap),
             ("actor_target.", &self.actor_target.varmap),
-            ("critic.", &self.critic.varmap),
-            ("critic_target.", &self.critic_target.varmap),
+            critic,
+            critic_target,
         ]
     }
 
     /// Draws the actor's and critics' weights from `rng` and copies them to the targets.
     pub fn init_weights(&self, rng: &mut impl Rng) -> Result<()> {
+        // The actor draws first, as it always has, so a seed keeps its networks.
         self.actor.init_weights(rng)?;
-        self.critic.init_weights(rng)?;
-        self.actor_pairs.copy()?;
-        self.critic_pairs.copy()
+        self.critics.init_weights(rng)?;
+        self.actor_pairs.copy()
     }
 
     /// Polyak averaging of both targets: `target ← (1 − τ) target + τ online`.
     pub fn soft_update(&self, tau: f32) -> Result<()> {
         self.actor_pairs.soft_update(tau)?;
-        self.critic_pairs.soft_update(tau)
+        self.critics.soft_update(tau)
     }
 }
