@@ -41,7 +41,7 @@ enum Command {
     /// Run a demonstration in simulation.
     #[command(subcommand)]
     Demo(demo::DemoCommand),
-    /// Train a grasp policy (PPO or SAC) with evaluation, checkpoints, resume and TensorBoard logs.
+    /// Train a grasp policy (PPO, SAC or TD3) with evaluation, checkpoints, resume and TensorBoard logs.
     Train(train_cmd::TrainArgs),
     /// Evaluate a saved model on held-out episodes (success rate, mean return and length).
     Eval(eval_cmd::EvalArgs),

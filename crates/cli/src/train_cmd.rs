@@ -1,4 +1,4 @@
-//! `fairgrasp train`: PPO or SAC on any registered environment with evaluation, best-model
+//! `fairgrasp train`: PPO, SAC or TD3 on any registered environment with evaluation, best-model
 //! saving, checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
 
 use anyhow::{Context, Result, bail};
