@@ -360,8 +360,9 @@ def reference_section(results: Path, image: Path, out: Path) -> str:
     w("")
     w(
         "Each side trains as its users would: fairgrasp's default training (`fairgrasp train`, "
-        "configs/ppo_grasp.toml, stopping early once 49 of 50 evaluation episodes succeed) and "
-        "SB3 PPO with the design's settings on the reference. Both evaluate every 50k env steps "
+        "configs/ppo_grasp.toml: Cartesian actions, the staged reward, physics at 120 Hz, "
+        "stopping early once 49 of 50 evaluation episodes succeed) and SB3 PPO with the design's "
+        "settings on the reference (240 Hz, PyBullet's default). Both evaluate every 50k env steps "
         "on 50 episodes (seeds 1,000,000…, deterministic policy, inside the budget) and keep "
         "their best model; after the budget that model plays 100 held-out episodes (seeds "
         "2,000,000,000…)."
