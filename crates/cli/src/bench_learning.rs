@@ -53,6 +53,9 @@ struct CurvePoint {
 struct RunResult {
     algo: String,
     env_id: String,
+    seed: u64,
+    /// Physics steps per simulated second, for the arm tasks.
+    physics_hz: Option<f64>,
     dir: PathBuf,
     summary: TrainSummary,
     curve: Vec<CurvePoint>,
@@ -135,11 +138,26 @@ fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
     Ok(RunResult {
         algo: algo.to_string(),
         env_id: policy.env_id().to_string(),
+        seed: policy.meta().train_seed,
+        physics_hz: physics_hz(&policy.meta().env, policy.env_id()),
         dir: dir.to_path_buf(),
         summary,
         curve,
         held_out,
     })
+}
+
+/// The physics rate of a model's arm task: its `scene.physics.dt`, else the scene's default
+/// (models store only the settings their training changed). `None` for tasks without the arm.
+fn physics_hz(env: &serde_json::Value, env_id: &str) -> Option<f64> {
+    if !env_id.starts_with("FaArm") {
+        return None;
+    }
+    let dt = env
+        .pointer("/scene/physics/dt")
+        .and_then(|v| v.as_f64())
+        .unwrap_or(fairgrasp_sim::scene::PhysicsConfig::default().dt as f64);
+    (dt > 0.0).then(|| 1.0 / dt)
 }
 
 /// The rows of progress.csv that hold an evaluation.
@@ -207,9 +225,9 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
     );
     let _ = writeln!(
         s,
-        "| algorithm | task | steps trained | wall time | env steps/s (updates included) | peak memory | 90 % reached at | 95 % reached at | held-out success | held-out mean return |"
+        "| algorithm | task | seed | physics | steps trained | wall time | env steps/s (updates included) | peak memory | 90 % reached at | 95 % reached at | held-out success | held-out mean return |"
     );
-    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in results {
         let at = |t: f64| {
             first_reaching(&r.curve, t)
@@ -218,9 +236,13 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {:.0}k | {:.1} min | {:.0} | {} | {} | {} | {:.0} % ({} episodes) | {:.2} |",
+            "| {} | {} | {} | {} | {:.0}k | {:.1} min | {:.0} | {} | {} | {} | {:.0} % ({} episodes) | {:.2} |",
             r.algo.to_uppercase(),
             r.env_id,
+            r.seed,
+            r.physics_hz
+                .map(|hz| format!("{hz:.0} Hz"))
+                .unwrap_or_else(|| "—".into()),
             r.summary.num_timesteps as f64 / 1e3,
             r.summary.seconds / 60.0,
             r.summary.fps,
@@ -245,9 +267,10 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
     for r in results {
         let _ = writeln!(
             s,
-            "<details><summary>{} on {} evaluation curve ({})</summary>\n",
+            "<details><summary>{} on {} (seed {}) evaluation curve ({})</summary>\n",
             r.algo.to_uppercase(),
             r.env_id,
+            r.seed,
             r.dir.display()
         );
         let _ = writeln!(s, "| env steps | wall time (min) | eval success |");
@@ -281,7 +304,13 @@ fn write_section(path: &Path, section: &str) -> Result<()> {
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
-/// Success rate against steps (left) and wall time (right), one line per algorithm.
+/// `FaArmPickPlace-v0` → `PickPlace`: the task in a legend.
+fn short_task(env_id: &str) -> &str {
+    let stem = env_id.split("-v").next().unwrap_or(env_id);
+    stem.strip_prefix("FaArm").unwrap_or(stem)
+}
+
+/// Success rate against steps (left) and wall time (right), one line per run.
 fn draw_curves(results: &[RunResult], path: &Path) -> Result<()> {
     use plotters::prelude::*;
     crate::plot_cmd::register_fonts();
@@ -330,7 +359,7 @@ fn draw_curves(results: &[RunResult], path: &Path) -> Result<()> {
             chart
                 .draw_series(LineSeries::new(points, colour.stroke_width(2)))
                 .map_err(|e| anyhow::anyhow!("{e}"))?
-                .label(r.algo.to_uppercase())
+                .label(format!("{} {} s{}", r.algo.to_uppercase(), short_task(&r.env_id), r.seed))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2))
                 });
@@ -345,4 +374,20 @@ fn draw_curves(results: &[RunResult], path: &Path) -> Result<()> {
     }
     root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn physics_rate_is_the_models_or_the_scenes_default() {
+        let rate = |env: serde_json::Value, id: &str| physics_hz(&env, id).map(f64::round);
+        let at_120 = serde_json::json!({ "scene": { "physics": { "dt": 1.0 / 120.0 } } });
+        assert_eq!(rate(at_120, "FaArmGrasp-v0"), Some(120.0));
+        assert_eq!(rate(serde_json::json!({}), "FaArmPickPlace-v0"), Some(240.0));
+        assert_eq!(rate(serde_json::json!({}), "Pendulum-v1"), None);
+        assert_eq!(short_task("FaArmPickPlace-v0"), "PickPlace");
+        assert_eq!(short_task("Pendulum-v1"), "Pendulum");
+    }
 }
