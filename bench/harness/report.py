@@ -321,8 +321,9 @@ def reference_section(results: Path, image: Path, out: Path) -> str:
         v1 = median(env_16, "env_steps_per_s_vec_1_thread")
         v2 = median(env_16, "env_steps_per_s_vec_2_threads")
         w(
-            f" With the default training's 16 envs (the grasp task's own settings): {v1:,.0f} on one "
-            f"thread and {v2:,.0f} on two, **{v2 / v1:.2f}×**."
+            f"With the default training's 16 envs (each thread steps 8 per vector step; the "
+            f"scene's own settings, 240 Hz): {v1:,.0f} on one thread and {v2:,.0f} on two, "
+            f"**{v2 / v1:.2f}×**."
         )
     w("")
 

@@ -227,16 +227,19 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
         s,
         "| algorithm | task | seed | physics | steps trained | wall time | env steps/s (updates included) | peak memory | 90 % reached at | 95 % reached at | held-out success | held-out mean return |"
     );
-    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(
+        s,
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
     for r in results {
         let at = |t: f64| {
             first_reaching(&r.curve, t)
-                .map(|p| format!("{:.0}k steps, {:.1} min", p.steps / 1e3, p.seconds / 60.0))
+                .map(|p| format!("{:.0}k steps, {}", p.steps / 1e3, wall_time(p.seconds)))
                 .unwrap_or_else(|| "not reached".into())
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.0}k | {:.1} min | {:.0} | {} | {} | {} | {:.0} % ({} episodes) | {:.2} |",
+            "| {} | {} | {} | {} | {:.0}k | {} | {:.0} | {} | {} | {} | {:.0} % ({} episodes) | {:.2} |",
             r.algo.to_uppercase(),
             r.env_id,
             r.seed,
@@ -244,7 +247,7 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
                 .map(|hz| format!("{hz:.0} Hz"))
                 .unwrap_or_else(|| "—".into()),
             r.summary.num_timesteps as f64 / 1e3,
-            r.summary.seconds / 60.0,
+            wall_time(r.summary.seconds),
             r.summary.fps,
             r.summary
                 .peak_memory_mib
@@ -304,6 +307,15 @@ fn write_section(path: &Path, section: &str) -> Result<()> {
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Seconds under two minutes (the default PPO's runs), minutes above.
+fn wall_time(seconds: f64) -> String {
+    if seconds < 120.0 {
+        format!("{seconds:.0} s")
+    } else {
+        format!("{:.1} min", seconds / 60.0)
+    }
+}
+
 /// `FaArmPickPlace-v0` → `PickPlace`: the task in a legend.
 fn short_task(env_id: &str) -> &str {
     let stem = env_id.split("-v").next().unwrap_or(env_id);
@@ -359,7 +371,12 @@ fn draw_curves(results: &[RunResult], path: &Path) -> Result<()> {
             chart
                 .draw_series(LineSeries::new(points, colour.stroke_width(2)))
                 .map_err(|e| anyhow::anyhow!("{e}"))?
-                .label(format!("{} {} s{}", r.algo.to_uppercase(), short_task(&r.env_id), r.seed))
+                .label(format!(
+                    "{} {} s{}",
+                    r.algo.to_uppercase(),
+                    short_task(&r.env_id),
+                    r.seed
+                ))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2))
                 });
@@ -385,9 +402,14 @@ mod tests {
         let rate = |env: serde_json::Value, id: &str| physics_hz(&env, id).map(f64::round);
         let at_120 = serde_json::json!({ "scene": { "physics": { "dt": 1.0 / 120.0 } } });
         assert_eq!(rate(at_120, "FaArmGrasp-v0"), Some(120.0));
-        assert_eq!(rate(serde_json::json!({}), "FaArmPickPlace-v0"), Some(240.0));
+        assert_eq!(
+            rate(serde_json::json!({}), "FaArmPickPlace-v0"),
+            Some(240.0)
+        );
         assert_eq!(rate(serde_json::json!({}), "Pendulum-v1"), None);
         assert_eq!(short_task("FaArmPickPlace-v0"), "PickPlace");
         assert_eq!(short_task("Pendulum-v1"), "Pendulum");
+        assert_eq!(wall_time(37.1), "37 s");
+        assert_eq!(wall_time(301.0), "5.0 min");
     }
 }
