@@ -3,9 +3,12 @@
 
 use anyhow::{Context, Result, bail};
 use fairgrasp_rl::configs::{builtin_table, default_run_dir, holds_a_run};
-use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume, train};
+use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume_until, train_until};
 use indicatif::{ProgressBar, ProgressStyle};
+use std::ops::ControlFlow;
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -47,7 +50,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     if let Some(dir) = &args.resume {
         let mut reporter = Reporter::new(args.quiet);
-        let summary = resume(dir, &overrides, |p| reporter.update(p))
+        let stop = stop_on_ctrl_c()?;
+        let summary = resume_until(dir, &overrides, |p| reporter.update_until(p, &stop))
             .with_context(|| format!("resuming {}", dir.display()))?;
         reporter.finish();
         return print_summary(&summary);
@@ -98,9 +102,27 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         run_dir.display()
     );
     let mut reporter = Reporter::new(args.quiet);
-    let summary = train(&config, &run_dir, |p| reporter.update(p))?;
+    let stop = stop_on_ctrl_c()?;
+    let summary = train_until(&config, &run_dir, |p| reporter.update_until(p, &stop))?;
     reporter.finish();
     print_summary(&summary)
+}
+
+/// Ctrl-C (SIGINT) asks the run to stop after its current iteration, writing its final model,
+/// logs and summary as at its end (the latest checkpoint stays for `--resume`); a second Ctrl-C
+/// quits at once. Installed over an ignored SIGINT too (a shell's background job).
+fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("\ninterrupted again: quitting without the final model");
+            std::process::exit(130);
+        }
+        eprintln!("\ninterrupted: stopping after this iteration (Ctrl-C again to quit at once)");
+    })
+    .context("cannot install the Ctrl-C handler")?;
+    Ok(stop)
 }
 
 /// Progress bar (or, quietly, one line per evaluation).
@@ -128,6 +150,16 @@ impl Reporter {
             bar,
             evaluations: 0,
             started: std::time::Instant::now(),
+        }
+    }
+
+    /// [`Self::update`], then whether the run goes on (not once `stop` is set).
+    fn update_until(&mut self, p: &Progress, stop: &AtomicBool) -> ControlFlow<()> {
+        self.update(p);
+        if stop.load(Ordering::SeqCst) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
         }
     }
 
@@ -181,6 +213,9 @@ fn print_summary(summary: &TrainSummary) -> Result<()> {
     );
     if summary.reached_threshold {
         println!("stopped early: the evaluation success threshold was reached");
+    }
+    if summary.stopped {
+        println!("stopped early by Ctrl-C; the final model is in the run directory");
     }
     if let Some(mib) = summary.peak_memory_mib {
         println!("peak memory {mib:.0} MiB");

@@ -185,36 +185,67 @@ const TINY_TRAIN_TOML: &str = "total_timesteps = 200000\nn_envs = 2\nthreads = 1
     [ppo]\nn_steps = 128\nbatch_size = 128\nn_epochs = 1\n\
     [env.task]\nmax_episode_steps = 20\n[env.reward]\nkind = \"staged\"\n";
 
-#[test]
-fn training_killed_with_sigkill_resumes_from_its_last_checkpoint_and_evaluates() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("tiny.toml");
+/// `fairgrasp train --quiet` on [`TINY_TRAIN_TOML`] into `dir/run`, in the background, returned
+/// once the run has written its checkpoint at `step` (with the config and run paths).
+fn tiny_training_past_checkpoint(
+    dir: &Path,
+    step: u64,
+    output: fn() -> std::process::Stdio,
+) -> (std::process::Child, PathBuf, PathBuf) {
+    let config = dir.join("tiny.toml");
     std::fs::write(&config, TINY_TRAIN_TOML).unwrap();
-    let run = dir.path().join("run");
-    let (config_arg, run_arg) = (config.to_str().unwrap(), run.to_str().unwrap());
+    let run = dir.join("run");
     let mut child = Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
-        .args([
-            "train",
-            "--config",
-            config_arg,
-            "--run-dir",
-            run_arg,
-            "--quiet",
-        ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
+        .args(["train", "--quiet", "--config"])
+        .arg(&config)
+        .arg("--run-dir")
+        .arg(&run)
+        .stdout(output())
+        .stderr(output())
         .spawn()
         .unwrap();
-    // Wait for the second checkpoint, then kill -9 in the middle of training.
+    let checkpoint = run.join(format!("checkpoints/step_{step}/trainer_state.json"));
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(300);
-    while !run
-        .join("checkpoints/step_1024/trainer_state.json")
-        .exists()
-    {
+    while !checkpoint.exists() {
         assert!(child.try_wait().unwrap().is_none(), "training exited early");
         assert!(std::time::Instant::now() < deadline, "no checkpoint");
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
+    (child, config, run)
+}
+
+#[test]
+fn ctrl_c_stops_training_with_its_final_model_and_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    // After the first checkpoint, one SIGINT: the run ends after that iteration, far short of
+    // its 200,000 steps, and writes what a finished run writes.
+    let (child, _, run) =
+        tiny_training_past_checkpoint(dir.path(), 512, std::process::Stdio::piped);
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("stopped early by Ctrl-C"), "{stdout}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stopped"], true);
+    let steps = summary["num_timesteps"].as_u64().unwrap();
+    assert!((512..200_000).contains(&steps), "{steps} steps");
+    assert!(run.join("final/model.json").is_file());
+}
+
+#[test]
+fn training_killed_with_sigkill_resumes_from_its_last_checkpoint_and_evaluates() {
+    let dir = tempfile::tempdir().unwrap();
+    // After the second checkpoint, kill -9 in the middle of training.
+    let (mut child, config, run) =
+        tiny_training_past_checkpoint(dir.path(), 1024, std::process::Stdio::null);
+    let (config_arg, run_arg) = (config.to_str().unwrap(), run.to_str().unwrap());
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
     assert!(!run.join("final").exists());
