@@ -292,20 +292,60 @@ impl<E: Env> Slot<E> {
     }
 }
 
-/// A vector's elements handed to the pool's parts, each part touching its own indices only.
-struct SharedRows<T>(*mut T);
+/// Environment `i`'s entries in the batches a call fills: each part of a pool call writes its
+/// own environments' rows, so nothing is gathered (or freed) on the caller's thread afterwards.
+struct Row<'a> {
+    obs: &'a mut [f32],
+    reward: &'a mut f32,
+    terminated: &'a mut bool,
+    truncated: &'a mut bool,
+    info: &'a mut Info,
+    reset_info: &'a mut Info,
+    episode_end: &'a mut Option<EpisodeEnd>,
+    error: &'a mut Option<EnvError>,
+}
 
-impl<T> SharedRows<T> {
+/// The vector env's per-environment storage, handed to the pool's parts as raw pointers.
+struct RowPtrs<E> {
+    slots: *mut Slot<E>,
+    obs: *mut f32,
+    obs_dim: usize,
+    rewards: *mut f32,
+    terminated: *mut bool,
+    truncated: *mut bool,
+    infos: *mut Info,
+    reset_infos: *mut Info,
+    episode_ends: *mut Option<EpisodeEnd>,
+    errors: *mut Option<EnvError>,
+}
+
+impl<E> RowPtrs<E> {
     /// # Safety
-    /// `i` must be in bounds, and no other thread may use element `i` meanwhile.
-    unsafe fn at(&self, i: usize) -> *mut T {
-        unsafe { self.0.add(i) }
+    /// `i` must be in bounds of every vector, which must outlive the returned references, and
+    /// no other thread may use index `i` meanwhile.
+    unsafe fn at<'a>(&self, i: usize) -> (&'a mut Slot<E>, Row<'a>) {
+        unsafe {
+            let obs = self.obs.add(i * self.obs_dim);
+            (
+                &mut *self.slots.add(i),
+                Row {
+                    obs: std::slice::from_raw_parts_mut(obs, self.obs_dim),
+                    reward: &mut *self.rewards.add(i),
+                    terminated: &mut *self.terminated.add(i),
+                    truncated: &mut *self.truncated.add(i),
+                    info: &mut *self.infos.add(i),
+                    reset_info: &mut *self.reset_infos.add(i),
+                    episode_end: &mut *self.episode_ends.add(i),
+                    error: &mut *self.errors.add(i),
+                },
+            )
+        }
     }
 }
 
-// SAFETY: only used inside `VecEnv::run`, whose parts take disjoint indices; `T: Send` because
-// an element is used from another thread.
-unsafe impl<T: Send> Sync for SharedRows<T> {}
+// SAFETY: only used inside `VecEnv::for_each_env`, whose parts take disjoint indices; `E: Send`
+// because an environment is stepped on another thread.
+unsafe impl<E: Send> Sync for RowPtrs<E> {}
 
 /// N environments stepped in parallel, with automatic resets (see the [module](self)
 /// documentation).
@@ -342,6 +382,8 @@ pub struct VecEnv<E: Env> {
     infos: Vec<Info>,
     reset_infos: Vec<Info>,
     episode_ends: Vec<Option<EpisodeEnd>>,
+    /// Each environment's failure in the current call, taken before it returns.
+    errors: Vec<Option<EnvError>>,
 }
 
 impl<E: Env> VecEnv<E> {
@@ -412,6 +454,7 @@ impl<E: Env> VecEnv<E> {
             infos: vec![Info::default(); n],
             reset_infos: vec![Info::default(); n],
             episode_ends: vec![None; n],
+            errors: (0..n).map(|_| None).collect(),
         })
     }
 
@@ -441,37 +484,44 @@ impl<E: Env> VecEnv<E> {
         self.slots.into_iter().map(|s| s.env).collect()
     }
 
-    /// Runs `f` on every environment, on the pool when there is one; results in index order.
-    /// With a pool, part `p` of `t` threads takes environments `p, p + t, …`: always the same
-    /// ones, so each environment's state stays in one core's cache.
-    fn run<T: Send>(&mut self, f: impl Fn(usize, &mut Slot<E>) -> T + Sync + Send) -> Vec<T> {
-        let Some(pool) = &self.pool else {
-            return self
-                .slots
-                .iter_mut()
-                .enumerate()
-                .map(|(i, s)| f(i, s))
-                .collect();
-        };
+    /// Runs `f` on every environment with its rows, on the pool when there is one, then returns
+    /// the failures `f` recorded. With a pool, part `p` of `t` threads takes environments
+    /// `p, p + t, …`: always the same ones, so each environment's state (and the memory its
+    /// steps allocate and free) stays with one core.
+    fn for_each_env(&mut self, f: impl Fn(usize, &mut Slot<E>, Row<'_>) + Sync) -> Result<()> {
         let n = self.slots.len();
-        let threads = pool.threads();
-        let mut results: Vec<Option<T>> = (0..n).map(|_| None).collect();
-        let slots = SharedRows(self.slots.as_mut_ptr());
-        let outs = SharedRows(results.as_mut_ptr());
-        pool.run(&|part| {
-            for i in (part..n).step_by(threads) {
-                // SAFETY: `i < n` indexes both vectors, which outlive `pool.run`; each index
-                // belongs to exactly one part, so no two threads touch the same element.
-                unsafe {
-                    let slot = &mut *slots.at(i);
-                    *outs.at(i) = Some(f(i, slot));
-                }
+        let ptrs = RowPtrs {
+            slots: self.slots.as_mut_ptr(),
+            obs: self.observations.as_mut_ptr(),
+            obs_dim: self.observation_space.dim(),
+            rewards: self.rewards.as_mut_ptr(),
+            terminated: self.terminated.as_mut_ptr(),
+            truncated: self.truncated.as_mut_ptr(),
+            infos: self.infos.as_mut_ptr(),
+            reset_infos: self.reset_infos.as_mut_ptr(),
+            episode_ends: self.episode_ends.as_mut_ptr(),
+            errors: self.errors.as_mut_ptr(),
+        };
+        let visit = |i: usize| {
+            // SAFETY: every vector holds `n` entries (`obs_dim` values each for the
+            // observations) and outlives this call; each index is visited by exactly one part.
+            let (slot, row) = unsafe { ptrs.at(i) };
+            f(i, slot, row);
+        };
+        match &self.pool {
+            None => (0..n).for_each(visit),
+            Some(pool) => {
+                let threads = pool.threads();
+                pool.run(&|part| (part..n).step_by(threads).for_each(visit));
             }
-        });
-        results
-            .into_iter()
-            .map(|r| r.expect("every environment is stepped by exactly one part"))
-            .collect()
+        }
+        let errors: Vec<(usize, EnvError)> = self
+            .errors
+            .iter_mut()
+            .enumerate()
+            .filter_map(|(i, e)| e.take().map(|e| (i, e)))
+            .collect();
+        Self::first_error(errors)
     }
 
     /// Turns per-environment failures into one error naming the first failed environment and
@@ -532,23 +582,19 @@ impl<E: Env> VectorEnv for VecEnv<E> {
 
     fn reset(&mut self, seed: Option<u64>) -> Result<&[f32]> {
         let obs_dim = self.observation_space.dim();
-        let results =
-            self.run(|i, slot| slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), obs_dim));
-        let mut errors = Vec::new();
-        for (i, result) in results.into_iter().enumerate() {
-            self.episode_ends[i] = None;
-            self.rewards[i] = 0.0;
-            self.terminated[i] = false;
-            self.truncated[i] = false;
-            match result {
+        self.for_each_env(|i, slot, row| {
+            *row.episode_end = None;
+            *row.reward = 0.0;
+            *row.terminated = false;
+            *row.truncated = false;
+            match slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), obs_dim) {
                 Ok((obs, info)) => {
-                    self.observations[i * obs_dim..(i + 1) * obs_dim].copy_from_slice(&obs);
-                    self.reset_infos[i] = info;
+                    row.obs.copy_from_slice(&obs);
+                    *row.reset_info = info;
                 }
-                Err(e) => errors.push((i, e)),
+                Err(e) => *row.error = Some(e),
             }
-        }
-        Self::first_error(errors)?;
+        })?;
         Ok(&self.observations)
     }
 
@@ -588,29 +634,25 @@ impl<E: Env> VectorEnv for VecEnv<E> {
         }
         self.check_actions(actions)?;
         let (obs_dim, act_dim) = (self.observation_space.dim(), self.action_space.dim());
-        let outcomes =
-            self.run(|i, slot| slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], obs_dim));
-        let mut errors = Vec::new();
-        for (i, outcome) in outcomes.into_iter().enumerate() {
-            match outcome {
+        self.for_each_env(|i, slot, row| {
+            match slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], obs_dim) {
                 Ok(o) => {
-                    self.observations[i * obs_dim..(i + 1) * obs_dim].copy_from_slice(&o.obs);
-                    self.rewards[i] = o.reward;
-                    self.terminated[i] = o.terminated;
-                    self.truncated[i] = o.truncated;
-                    self.infos[i] = o.info;
+                    row.obs.copy_from_slice(&o.obs);
+                    *row.reward = o.reward;
+                    *row.terminated = o.terminated;
+                    *row.truncated = o.truncated;
+                    *row.info = o.info;
                     if let Some(end) = &o.end {
-                        self.reset_infos[i] = end.reset_info.clone();
+                        *row.reset_info = end.reset_info.clone();
                     }
-                    self.episode_ends[i] = o.end;
+                    *row.episode_end = o.end;
                 }
                 Err(e) => {
-                    self.episode_ends[i] = None;
-                    errors.push((i, e));
+                    *row.episode_end = None;
+                    *row.error = Some(e);
                 }
             }
-        }
-        Self::first_error(errors)?;
+        })?;
         Ok(VecStep {
             observations: &self.observations,
             rewards: &self.rewards,
