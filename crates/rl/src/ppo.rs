@@ -189,6 +189,12 @@ impl Ppo {
         })
     }
 
+    /// Threads for the update: with 2 or more, the value head's passes run beside the policy's
+    /// (the same weights, bit for bit). `new` starts with one.
+    pub fn set_update_threads(&mut self, threads: usize) -> Result<()> {
+        self.fused.set_threads(threads)
+    }
+
     /// Fills the rollout buffer from `venv`, starting from its current observations.
     /// `on_step` sees every vector step (for episode statistics).
     pub fn collect_rollout<V: VectorEnv>(

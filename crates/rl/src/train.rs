@@ -376,13 +376,15 @@ fn dispatch(
     let (obs_dim, act_dim) = (venv.obs_dim(), venv.act_dim());
     match config.algo {
         Algo::Ppo => {
-            let ppo = Ppo::new(
+            let mut ppo = Ppo::new(
                 config.ppo.clone(),
                 obs_dim,
                 act_dim,
                 config.n_envs,
                 config.seed,
             )?;
+            // The env threads idle during the update; its two heads use them.
+            ppo.set_update_threads(config.threads)?;
             run(config, run_dir, ppo, venv, checkpoint, on_progress)
         }
         Algo::Sac => {

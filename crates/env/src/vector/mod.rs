@@ -24,7 +24,7 @@ use crate::spaces::BoxSpace;
 use crate::wrappers::{EpisodeAccumulator, EpisodeStats};
 
 mod pool;
-use pool::LockstepPool;
+pub use pool::LockstepPool;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 /// What is kept when an environment's episode ends inside [`VectorEnv::step`].

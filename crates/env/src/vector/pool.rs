@@ -1,4 +1,5 @@
-//! The worker threads that step a [`super::VecEnv`] in lockstep.
+//! The worker threads that step a [`super::VecEnv`] in lockstep (and run the two heads of a PPO
+//! update side by side).
 //!
 //! Written here rather than taken from rayon because a vector step is a fork-join of a few
 //! hundred microseconds repeated thousands of times a second. `rayon::ThreadPool::install`
@@ -52,14 +53,14 @@ unsafe impl Sync for Shared {}
 unsafe impl Send for Shared {}
 
 /// Fork-join over `threads` parts: part 0 on the calling thread, parts 1.. on workers.
-pub(crate) struct LockstepPool {
+pub struct LockstepPool {
     shared: Arc<Shared>,
     workers: Vec<JoinHandle<()>>,
 }
 
 impl LockstepPool {
     /// Starts `threads - 1` workers (none for `threads <= 1`).
-    pub(crate) fn new(threads: usize) -> std::io::Result<Self> {
+    pub fn new(threads: usize) -> std::io::Result<Self> {
         let shared = Arc::new(Shared {
             generation: AtomicU64::new(0),
             pending: AtomicUsize::new(0),
@@ -84,13 +85,13 @@ impl LockstepPool {
     }
 
     /// Parts per call: the workers plus the caller.
-    pub(crate) fn threads(&self) -> usize {
+    pub fn threads(&self) -> usize {
         self.workers.len() + 1
     }
 
     /// Calls `task(part)` for every part in `0..threads()`, part 0 on this thread, and returns
     /// when all have returned. A panic in any part is re-raised here after every part ended.
-    pub(crate) fn run<'a>(&self, task: &'a (dyn Fn(usize) + Sync + 'a)) {
+    pub fn run<'a>(&self, task: &'a (dyn Fn(usize) + Sync + 'a)) {
         if self.workers.is_empty() {
             task(0);
             return;
