@@ -315,7 +315,8 @@ def reference_section(results: Path, image: Path, out: Path) -> str:
         "An env step is 8 physics steps plus the observation, reward and success check; "
         "episodes end at the 100-step limit and reset. **Thread scaling: our `VecEnv` of "
         f"{n} envs steps {vec1:,.0f} env steps/s on one thread and {vec2:,.0f} on two, "
-        f"{vec2 / vec1:.2f}× (target ≥ 1.8×).**"
+        f"{vec2 / vec1:.2f}× (target ≥ 1.8×).** The two alternate in 0.25 s slices within each "
+        "measurement, so a change in the host's speed falls on both."
     )
     if env_16:
         v1 = median(env_16, "env_steps_per_s_vec_1_thread")
