@@ -189,3 +189,54 @@ fn torque_control_is_refused_and_settings_are_checked() {
         }
     }
 }
+
+#[test]
+fn a_tracking_lag_trails_the_ramp_by_lag_times_speed_and_still_arrives() {
+    let lag = 0.05f32;
+    let mut exact = scene();
+    let mut lagged = {
+        let mut config = kinematic_config();
+        config.arm.kinematic_lag_s = lag;
+        Scene::new(config).unwrap()
+    };
+    exact.reset(0).unwrap();
+    lagged.reset(0).unwrap();
+    let speed = kinematic_config().arm.kinematic_speed_deg_s.to_radians();
+    let dt = exact.dt();
+    let mut target = exact.arm_positions();
+    target[0] += 2.5;
+    exact.set_arm_targets(&target).unwrap();
+    lagged.set_arm_targets(&target).unwrap();
+    // The ramp reaches its speed cap after speed / acc = 0.25 s; 0.6 s in, both move at the cap
+    // and the lagged joint has settled into trailing by lag · speed.
+    for _ in 0..(0.6 / dt) as usize {
+        exact.step_physics().unwrap();
+        lagged.step_physics().unwrap();
+    }
+    let gap = exact.arm_positions()[0] - lagged.arm_positions()[0];
+    let expected = lag * speed;
+    assert!(
+        (gap - expected).abs() < 0.1 * expected,
+        "the lagged joint trails by {gap} rad, expected about {expected}"
+    );
+    assert!((lagged.arm_velocities()[0] - speed).abs() < 0.01 * speed);
+    for _ in 0..(1.5 / dt) as usize {
+        lagged.step_physics().unwrap();
+    }
+    let q = lagged.arm_positions();
+    assert!(
+        (q[0] - target[0]).abs() < 1e-3,
+        "the lagged joint stopped {} rad short",
+        target[0] - q[0]
+    );
+}
+
+#[test]
+fn a_tracking_lag_outside_0_to_1_s_is_refused_by_name() {
+    for bad in [-0.01, 1.5, f32::NAN] {
+        let mut config = kinematic_config();
+        config.arm.kinematic_lag_s = bad;
+        let error = Scene::new(config).err().expect("refused").to_string();
+        assert!(error.contains("arm.kinematic_lag_s"), "{error}");
+    }
+}

@@ -29,18 +29,21 @@ pub(crate) struct KinematicArm {
     /// ones, which are read from their bodies).
     pub(crate) q: Vec<f32>,
     pub(crate) qd: Vec<f32>,
+    /// The share of the gap to the ramp's set point a joint closes per physics step: 1 without
+    /// a tracking lag, `1 − e^(−dt/lag)` with one.
+    pub(crate) follow: f32,
 }
 
 impl KinematicArm {
-    /// A drive for `joints` (per robot joint: `None` for kinematic), the ramp's caps in rad/s
-    /// and rad/s², `dt` the physics step.
+    /// A drive for `joints` (per robot joint: `None` for kinematic): the ramp's caps in rad/s
+    /// and rad/s² and the tracking lag in s (`motion`), `dt` the physics step.
     pub(crate) fn new(
         impulse: Vec<Option<ImpulseJointHandle>>,
         limits: &[(f32, f32)],
-        speed: f32,
-        acc: f32,
+        motion: (f32, f32, f32),
         dt: f32,
     ) -> Self {
+        let (speed, acc, lag) = motion;
         let ramp_joints: Vec<usize> = (0..impulse.len())
             .filter(|&j| impulse[j].is_none())
             .collect();
@@ -55,6 +58,11 @@ impl KinematicArm {
             ramp_joints,
             q: vec![0.0; n],
             qd: vec![0.0; n],
+            follow: if lag > 0.0 {
+                1.0 - (-dt / lag).exp()
+            } else {
+                1.0
+            },
         }
     }
 }
@@ -142,7 +150,12 @@ impl Robot {
             return;
         };
         for (&j, &p) in arm.ramp_joints.iter().zip(&next) {
-            let p = p as f32;
+            // Without a lag `follow` is 1 and the joint lands exactly on the set point.
+            let p = if arm.follow < 1.0 {
+                arm.q[j] + arm.follow * (p as f32 - arm.q[j])
+            } else {
+                p as f32
+            };
             arm.qd[j] = (p - arm.q[j]) / dt;
             arm.q[j] = p;
         }

@@ -62,9 +62,11 @@ pub enum JointDrive {
     /// (rad/s, rad/s²; m/s and m/s² for prismatic joints) every physics step of `dt` seconds,
     /// their links kinematic bodies. The joints in `dynamic_joints` (the gripper's) stay
     /// dynamic: impulse joints with PD motors; no kinematic joint may follow one of them.
+    /// `lag` (s): the joints follow the ramp's set point through a first-order lag (0: on it).
     Kinematic {
         speed: f32,
         acc: f32,
+        lag: f32,
         dt: f32,
         dynamic_joints: Vec<String>,
     },
@@ -562,9 +564,11 @@ impl Robot {
                 }
                 (Some(multibody), None)
             }
-            JointDrive::Kinematic { speed, acc, dt, .. } => {
+            JointDrive::Kinematic {
+                speed, acc, lag, dt, ..
+            } => {
                 let limits: Vec<(f32, f32)> = joints.iter().map(|j| j.limits).collect();
-                let arm = KinematicArm::new(impulse, &limits, *speed, *acc, *dt);
+                let arm = KinematicArm::new(impulse, &limits, (*speed, *acc, *lag), *dt);
                 (None, Some(arm))
             }
         };

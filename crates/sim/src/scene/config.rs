@@ -261,6 +261,11 @@ pub struct ArmConfig {
     pub kinematic_speed_deg_s: f32,
     /// Joint acceleration cap of the kinematic drive (deg/s²): the deployment's safety default.
     pub kinematic_acc_deg_s2: f32,
+    /// Tracking lag of the kinematic drive (s): each joint follows the ramp's set point through
+    /// a first-order lag with this time constant, so at a steady speed v it trails by
+    /// `lag · v`, as a PD arm trails by `kd / kp · v` (0.05 s with the default gains) and a real
+    /// drive by its servo delay. 0 (the default): the joints sit on the set point.
+    pub kinematic_lag_s: f32,
 }
 
 /// See [`ArmConfig::drive`].
@@ -298,6 +303,7 @@ impl Default for ArmConfig {
             drive: ArmDrive::Pd,
             kinematic_speed_deg_s: 180.0,
             kinematic_acc_deg_s2: 720.0,
+            kinematic_lag_s: 0.0,
         }
     }
 }
@@ -508,6 +514,13 @@ impl SceneConfig {
         }
         positive("arm.kinematic_speed_deg_s", self.arm.kinematic_speed_deg_s)?;
         positive("arm.kinematic_acc_deg_s2", self.arm.kinematic_acc_deg_s2)?;
+        let lag = self.arm.kinematic_lag_s;
+        if !(lag.is_finite() && (0.0..=1.0).contains(&lag)) {
+            return Err(SimError::config(
+                "arm.kinematic_lag_s",
+                format!("must be between 0 and 1 s, got {lag}"),
+            ));
+        }
         if self.arm.base_xyz.iter().any(|v| !v.is_finite()) || !self.arm.base_yaw.is_finite() {
             return Err(SimError::config("arm.base_xyz", "must be finite"));
         }

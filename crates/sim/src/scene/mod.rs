@@ -196,6 +196,7 @@ impl Scene {
                 ArmDrive::Kinematic => JointDrive::Kinematic {
                     speed: config.arm.kinematic_speed_deg_s.to_radians(),
                     acc: config.arm.kinematic_acc_deg_s2.to_radians(),
+                    lag: config.arm.kinematic_lag_s,
                     dt: config.physics.dt,
                     dynamic_joints: vec![
                         "left_finger_joint".to_string(),
