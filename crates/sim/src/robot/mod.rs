@@ -565,7 +565,11 @@ impl Robot {
                 (Some(multibody), None)
             }
             JointDrive::Kinematic {
-                speed, acc, lag, dt, ..
+                speed,
+                acc,
+                lag,
+                dt,
+                ..
             } => {
                 let limits: Vec<(f32, f32)> = joints.iter().map(|j| j.limits).collect();
                 let arm = KinematicArm::new(impulse, &limits, (*speed, *acc, *lag), *dt);
