@@ -66,6 +66,11 @@ pub struct DeployArgs {
     /// Control steps per episode (default: the model's episode length).
     #[arg(long)]
     pub steps: Option<u32>,
+    /// Keep acting after the task's success rule has held (object lifted in the closed
+    /// gripper for its hold steps), until --steps. By default the episode ends there, as it
+    /// did in training.
+    #[arg(long)]
+    pub full_episodes: bool,
     /// Global speed scale in (0, 1] (overrides the safety file's; 0.25 by default): the
     /// policy's motion slowed in time, like a teach pendant's speed slider.
     #[arg(long)]
@@ -168,6 +173,7 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         max_steps: args.steps,
         safety,
         gripper_index: args.gripper_index,
+        end_at_success: !args.full_episodes,
         ..DeployOptions::default()
     };
     let log = JsonLog::create(Some(&args.log))?;

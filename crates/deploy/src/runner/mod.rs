@@ -30,6 +30,7 @@ use crate::kinematics::tcp_forward_kinematics;
 use crate::pose_source::PoseSource;
 use crate::robot::{RobotCommand, RobotLink};
 use crate::safety::{Fault, SafetyConfig, SafetyFilter, Watchdog};
+use fairgrasp_env::tasks::grasp::Streak;
 use fairgrasp_rl::policies::Policy;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -48,6 +49,11 @@ pub struct DeployOptions {
     pub gripper_index: u8,
     /// How long to wait for the first object pose of an episode.
     pub pose_timeout: Duration,
+    /// End an episode once the task's success rule has held for its hold steps, on the
+    /// estimated state, as training's episodes ended (false: act until `max_steps`). The
+    /// policy never learnt what to do after success: holding on, kinematic-drive policies
+    /// drifted with the lifted cube to the workspace box's edge (2 of 3 twin runs stopped).
+    pub end_at_success: bool,
 }
 
 impl Default for DeployOptions {
@@ -59,6 +65,7 @@ impl Default for DeployOptions {
             safety: SafetyConfig::default(),
             gripper_index: 1,
             pose_timeout: Duration::from_secs(2),
+            end_at_success: true,
         }
     }
 }
@@ -75,7 +82,10 @@ pub trait EpisodeHost {
 /// An episode's outcome.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EpisodeReport {
+    /// Control steps the policy acted.
     pub steps: u32,
+    /// The loop saw the task's success rule hold for its hold steps and ended the episode.
+    pub ended_at_success: bool,
     /// The host's judgement, if it gives one.
     pub success: Option<bool>,
     /// Control steps whose Cartesian target had no inverse kinematics.
@@ -188,8 +198,13 @@ impl Deployment {
                             Some(false) => "failed",
                             None => "done",
                         };
+                        let ended = if report.ended_at_success {
+                            " (success rule held: ended)"
+                        } else {
+                            ""
+                        };
                         println!(
-                            "episode {}: {verdict} after {} steps",
+                            "episode {}: {verdict} after {} steps{ended}",
                             index + 1,
                             report.steps
                         );
@@ -273,7 +288,13 @@ impl Deployment {
         self.link.send(&RobotCommand::MoveGripper {
             index: self.options.gripper_index,
             position_percent: if open { 100 } else { 0 },
-            speed_percent: 100,
+            // The speed scale slows the gripper as it slows the arm: at 0.25 with the gripper
+            // at full speed, one control step (133 ms) let a flickering close command shut
+            // the fingers that training's 33 ms steps only started, and a kinematic-drive
+            // policy shoved the cube to the workspace box's edge (twin, session 13).
+            speed_percent: (100.0 * self.options.safety.speed_scale)
+                .round()
+                .clamp(1.0, 100.0) as u8,
             force_percent: 50,
             max_time_ms: 3000,
         })
@@ -332,6 +353,9 @@ impl Deployment {
         let steps = self.options.max_steps.unwrap_or(self.io.max_steps);
         let mut ik_failures = 0;
         let mut deadline = Instant::now();
+        let rule = self.io.task().clone();
+        let mut streak = Streak::default();
+        let mut acted = steps;
         for step in 0..steps {
             let reading = self.checked_state()?;
             if let Some(p) = pose
@@ -348,6 +372,12 @@ impl Deployment {
                 closing,
                 Instant::now(),
             );
+            if self.options.end_at_success
+                && streak.update(rule.holds(&state)) >= rule.success_hold_steps
+            {
+                acted = step;
+                break;
+            }
             let obs = self.io.observe(&state, &shown);
             let output = self.policy.act(&obs, true).map_err(|e| Fault::CallFailed {
                 call: "policy".into(),
@@ -396,7 +426,8 @@ impl Deployment {
         self.link.send(&RobotCommand::ServoMoveEnd)?;
         self.gripper(true)?;
         Ok(EpisodeReport {
-            steps,
+            steps: acted,
+            ended_at_success: acted < steps,
             success: None,
             ik_failures,
         })

@@ -8,6 +8,7 @@ use fairgrasp_env::arm::ServoConfig;
 use fairgrasp_env::arm::{ActionMode, ArmState, Command};
 use fairgrasp_env::sim::kinematics::SerialChain;
 use fairgrasp_env::sim::scene::ArmDrive;
+use fairgrasp_env::tasks::grasp::GraspSettings;
 use fairgrasp_env::wrappers::RescaleAction;
 use fairgrasp_env::{Env, GraspConfig, GraspEnv};
 use fairgrasp_rl::policies::Policy;
@@ -63,7 +64,11 @@ impl ModelIo {
 
     /// The grasp env with these settings (the robot, its home pose and limits, the table):
     /// what the commissioning steps need when no model is given.
-    pub fn for_config(config: GraspConfig) -> Result<Self> {
+    pub fn for_config(mut config: GraspConfig) -> Result<Self> {
+        // The nominal world: a model trained with domain randomisation must not find its home
+        // pose jittered or its object resized here (observation noise is never added outside
+        // `step` anyway).
+        config.randomization.enabled = false;
         let mut env = RescaleAction::new(GraspEnv::new(config)?)?;
         env.reset(Some(0))?;
         let inner = env.inner();
@@ -80,6 +85,12 @@ impl ModelIo {
             nominal,
             env,
         })
+    }
+
+    /// The model's `[task]` settings: the success rule ([`GraspSettings::holds`] for
+    /// `success_hold_steps` control steps) that ended its training episodes.
+    pub fn task(&self) -> &GraspSettings {
+        &self.env.inner().config().task
     }
 
     /// The motion model the policy was trained through (`[control.servo]`).
@@ -195,5 +206,20 @@ mod tests {
         config.scene.arm.kinematic_acc_deg_s2 = 2000.0;
         let snappier = ModelIo::for_config(config).unwrap();
         assert!(snappier.motion_mismatch(&safety).unwrap().contains("2000"));
+    }
+
+    #[test]
+    fn a_model_trained_with_randomisation_deploys_from_the_nominal_home() {
+        let nominal = ModelIo::for_config(GraspConfig::default()).unwrap();
+        let mut config = GraspConfig::default();
+        config.randomization.enabled = true;
+        config.randomization.initial_joint_jitter = 0.05;
+        config.randomization.object_scale = [0.5, 0.6];
+        let randomised = ModelIo::for_config(config).unwrap();
+        assert_eq!(randomised.nominal.q, nominal.nominal.q);
+        assert_eq!(
+            randomised.nominal.objects[0].rest_z,
+            nominal.nominal.objects[0].rest_z
+        );
     }
 }

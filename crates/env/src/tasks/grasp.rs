@@ -61,6 +61,18 @@ impl Default for GraspSettings {
     }
 }
 
+impl GraspSettings {
+    /// The success conditions on one state: object 0 held by the closed gripper, lifted at
+    /// least `success_min_lift` and within `success_max_offset` of the TCP. Success is these
+    /// holding for `success_hold_steps` consecutive control steps; the deployment loop applies
+    /// the same rule to its estimated states.
+    pub fn holds(&self, state: &ArmState) -> bool {
+        state.grasped(0)
+            && state.lift(0) > self.success_min_lift as f64
+            && state.tcp_to_object(0).norm() < self.success_max_offset as f64
+    }
+}
+
 impl TaskSettings for GraspSettings {
     fn max_episode_steps(&self) -> u32 {
         self.max_episode_steps
@@ -290,10 +302,7 @@ impl Task for Grasp {
         let grasped = state.grasped(0);
         let lift = state.lift(0);
         let distance = state.tcp_to_object(0).norm();
-        let holds = grasped
-            && lift > self.settings.success_min_lift as f64
-            && distance < self.settings.success_max_offset as f64;
-        let streak = self.streak.update(holds);
+        let streak = self.streak.update(self.settings.holds(state));
         Evaluation {
             success: streak >= self.settings.success_hold_steps,
             failure: scene
