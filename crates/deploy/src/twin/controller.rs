@@ -32,7 +32,9 @@
 //!   Safety stops show in their own flags, not in `main_code`.
 //! - **Gripper**: `ActGripper(index 1…8, 1)` activates, `(…, 0)` resets; `MoveGripper` before
 //!   activation → 73; position, speed and force in 0…100 % (else 4); `maxtime` 0…30000 ms (0:
-//!   30 s). Speed and force are accepted and not modelled (the simulated fingers have their own).
+//!   30 s). The set point moves at the speed % of the simulated fingers' own speed
+//!   ([`super::gripper::FULL_SPEED_PERCENT_PER_S`]); force is accepted and not modelled (the
+//!   simulated fingers have their own).
 //!   Motion done on arrival, on a stall (an object between the fingers) or after `maxtime`.
 //! - **Kinematics**: the simulator's chain from the arm base to the gripper's centre point (the
 //!   TCP as if the gripper were configured as the tool). Poses are `[x, y, z, rx, ry, rz]` in mm
@@ -548,7 +550,9 @@ impl Controller {
             max_time_ms as f64 / 1000.0
         };
         self.motion_commands += 1;
-        Ok(self.gripper.command(now, percent[0] as f64, max_time))
+        Ok(self
+            .gripper
+            .command(now, percent[0] as f64, percent[1] as f64, max_time))
     }
 
     /// Whether gripper command `command` is still moving.
@@ -601,7 +605,7 @@ impl Controller {
         self.advance(now);
         Setpoint {
             joints_deg: self.setpoint,
-            gripper_percent: self.gripper.target,
+            gripper_percent: self.gripper.setpoint(now),
         }
     }
 

@@ -1,12 +1,17 @@
 //! The twin's gripper as the controller sees it: activation, a commanded position in % of the
-//! stroke (0 closed … 100 open), and "motion done" when the fingers arrive, stall on an object
-//! or run out of the command's time.
+//! stroke (0 closed … 100 open) reached at the command's speed, and "motion done" when the
+//! fingers arrive, stall on an object or run out of the command's time.
 
 /// Position error that counts as arrived (% of the stroke).
 const ARRIVED_PERCENT: f64 = 1.0;
 /// Movement smaller than this (%) over [`STALL_SECONDS`] is a stall (fingers on an object).
 const PROGRESS_PERCENT: f64 = 0.3;
 const STALL_SECONDS: f64 = 0.15;
+/// The set point's speed at 100 % (% of the stroke per second): the simulated fingers' own,
+/// which open or close by 46 of their 90 mm in one 1/30 s control step once moving (measured in
+/// training episodes), so at 100 % the ramp leaves their motion as trained and at `s` % it
+/// takes 100/`s` times as long, as the deployment's speed scale slows the arm.
+pub const FULL_SPEED_PERCENT_PER_S: f64 = 1500.0;
 
 /// The gripper state machine.
 #[derive(Clone, Debug)]
@@ -14,6 +19,12 @@ pub struct Gripper {
     pub active: bool,
     /// Commanded position (%).
     pub target: f64,
+    /// Where the fingers are sent now (%): moves towards `target` at `speed`.
+    setpoint: f64,
+    /// % of the stroke per second.
+    speed: f64,
+    /// When `setpoint` was last advanced (s).
+    ramped_at: f64,
     /// Measured position (%).
     pub position: f64,
     pub done: bool,
@@ -31,6 +42,9 @@ impl Gripper {
         Self {
             active,
             target: 100.0,
+            setpoint: 100.0,
+            speed: FULL_SPEED_PERCENT_PER_S,
+            ramped_at: 0.0,
             position: 100.0,
             done: true,
             command: 0,
@@ -40,15 +54,28 @@ impl Gripper {
         }
     }
 
-    /// Starts a move to `percent` (0…100) that gives up after `max_time` s; returns its number.
-    pub fn command(&mut self, now: f64, percent: f64, max_time: f64) -> u64 {
+    /// Starts a move to `percent` (0…100) at `speed_percent` (1…100) of the full speed that
+    /// gives up after `max_time` s; returns its number.
+    pub fn command(&mut self, now: f64, percent: f64, speed_percent: f64, max_time: f64) -> u64 {
         self.target = percent.clamp(0.0, 100.0);
+        // From where the fingers are: after a stall on an object the set point had run ahead.
+        self.setpoint = self.position;
+        self.ramped_at = now;
+        self.speed = speed_percent.clamp(1.0, 100.0) / 100.0 * FULL_SPEED_PERCENT_PER_S;
         self.done = (self.position - self.target).abs() < ARRIVED_PERCENT;
         self.commanded_at = now;
         self.max_time = max_time;
         self.progress = (now, self.position);
         self.command += 1;
         self.command
+    }
+
+    /// The position the fingers are sent to at `now` (%).
+    pub fn setpoint(&mut self, now: f64) -> f64 {
+        let step = self.speed * (now - self.ramped_at).max(0.0);
+        self.ramped_at = now;
+        self.setpoint += (self.target - self.setpoint).clamp(-step, step);
+        self.setpoint
     }
 
     /// Feeds the measured position (%).
@@ -70,6 +97,7 @@ impl Gripper {
     pub fn hold_at(&mut self, position: f64) {
         self.position = position;
         self.target = position;
+        self.setpoint = position;
         self.done = true;
     }
 }
@@ -81,26 +109,44 @@ mod tests {
     #[test]
     fn done_on_arrival_on_stall_and_on_timeout() {
         let mut g = Gripper::new(true);
-        g.command(0.0, 0.0, 10.0);
+        g.command(0.0, 0.0, 100.0, 10.0);
         assert!(!g.done);
         g.observe(0.05, 50.0);
         assert!(!g.done);
         g.observe(0.1, 0.5);
         assert!(g.done, "arrived");
 
-        g.command(1.0, 100.0, 10.0);
+        g.command(1.0, 100.0, 100.0, 10.0);
         g.observe(1.05, 40.0);
         g.observe(1.1, 40.1);
         assert!(!g.done, "not yet stalled");
         g.observe(1.25, 40.1);
         assert!(g.done, "stalled on an object");
 
-        g.command(2.0, 0.0, 0.2);
+        g.command(2.0, 0.0, 100.0, 0.2);
         for i in 1..=3 {
             g.observe(2.0 + i as f64 * 0.05, 40.0 - i as f64 * 5.0);
         }
         assert!(!g.done);
         g.observe(2.25, 20.0);
         assert!(g.done, "out of time");
+    }
+
+    #[test]
+    fn the_set_point_moves_at_the_commanded_speed() {
+        let mut g = Gripper::new(true);
+        g.command(0.0, 0.0, 25.0, 10.0);
+        // A quarter of full speed: 375 %/s, so 37.5 % of the stroke in 0.1 s.
+        let after = g.setpoint(0.1);
+        assert!((after - 62.5).abs() < 1e-9, "{after}");
+        assert_eq!(g.setpoint(1.0), 0.0, "stops at the target");
+        // A new command ramps from where the fingers are, not from the old set point.
+        g.observe(1.0, 40.0);
+        g.command(1.0, 100.0, 100.0, 10.0);
+        let after = g.setpoint(1.02);
+        assert!((after - 70.0).abs() < 1e-9, "{after}");
+        // Out-of-range speeds are held to 1…100 %.
+        g.command(2.0, 0.0, 0.0, 10.0);
+        assert!((g.setpoint(3.0) - (g.position - 15.0)).abs() < 1e-9);
     }
 }
