@@ -133,6 +133,27 @@ fn training_config_errors_name_the_key() {
 }
 
 #[test]
+fn every_shipped_training_config_is_accepted() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs");
+    let mut checked = Vec::new();
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        // The scene and env files are other kinds of configuration.
+        if !text.contains("total_timesteps") {
+            continue;
+        }
+        TrainConfig::from_toml_str(&text, &[])
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        checked.push(path.file_name().unwrap().to_string_lossy().into_owned());
+    }
+    assert!(
+        checked.iter().any(|n| n == "ppo_deploy_kinematic.toml"),
+        "{checked:?}"
+    );
+}
+
+#[test]
 fn a_resumed_run_continues_counters_optimizer_and_logs_from_the_last_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path();
