@@ -284,7 +284,9 @@ def reference_section(results: Path, image: Path, out: Path) -> str:
             "arm as MuJoCo's and PyBullet's. The kinematic rows are our `arm.drive = \"kinematic\"` "
             "(`configs/scene_kinematic.toml`): the arm follows its targets within the controller's speed "
             "and acceleration caps, as the real FR5 does under ServoJ, and only the gripper is dynamic "
-            "(docs/simulation.md)."
+            "(docs/simulation.md). Policies trained on it with observation noise "
+            "(`configs/ppo_deploy_kinematic.toml`) grasp on the PD-driven digital twin as PD-trained "
+            "ones do (docs/simulation.md, *Transfer to the PD arm*)."
         )
         w("")
     if host:
