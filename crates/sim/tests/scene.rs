@@ -120,6 +120,41 @@ fn position_control_tracks_targets_within_limits() {
 }
 
 #[test]
+fn joint_limits_stop_a_joint_driven_into_them() {
+    // The limit constraints are switched on only once a joint is past a limit (a speed-up):
+    // full effort into the limit must still be stopped there, joint by joint and both ways.
+    for (joint, upper) in [(0, true), (0, false), (3, true), (5, false)] {
+        let mut scene = scene();
+        scene.reset(0).unwrap();
+        let (lower, upper_limit) = scene.arm_limits()[joint];
+        let (limit, sign) = if upper {
+            (upper_limit, 1.0)
+        } else {
+            (lower, -1.0)
+        };
+        let mut q = scene.arm_positions();
+        q[joint] = limit - sign * 0.15;
+        scene.set_arm_positions(&q).unwrap();
+        let mut tau = vec![0.0; scene.arm_dof()];
+        tau[joint] = sign * 1000.0; // capped at the joint's effort limit
+        scene.set_arm_torques(&tau).unwrap();
+        let mut furthest = f32::NEG_INFINITY;
+        for _ in 0..30 {
+            scene.step_control().unwrap();
+            furthest = furthest.max(sign * (scene.arm_positions()[joint] - limit));
+        }
+        assert!(
+            furthest > -0.01,
+            "joint {joint} never reached its limit {limit} (closest {furthest})"
+        );
+        assert!(
+            furthest < 0.03,
+            "joint {joint} went {furthest} rad past its limit {limit}"
+        );
+    }
+}
+
+#[test]
 fn torque_control_drives_joints_and_caps_at_effort() {
     let mut scene = scene();
     scene.reset(0).unwrap();

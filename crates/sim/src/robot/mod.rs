@@ -895,17 +895,20 @@ impl Robot {
                 } else {
                     (self.gains[j].kp, self.gains[j].kd)
                 };
+                if kp == 0.0 && kd == 0.0 {
+                    // A motor without gains pushes nothing, but rapier would still build and
+                    // solve a constraint for it (with a mass-matrix solve): off instead, with
+                    // the same trajectory. The mimic finger's motor is one, and every motor in
+                    // torque control (holding 58.7k -> 59.2k steps/s).
+                    link.joint.data.motor_axes &= !JointAxesMask::from(joint.axis());
+                    continue;
+                }
                 link.joint
                     .data
                     .set_motor(joint.axis(), self.targets[j], 0.0, kp, kd);
-                link.joint.data.set_motor_max_force(
-                    joint.axis(),
-                    if kp == 0.0 && kd == 0.0 {
-                        0.0
-                    } else {
-                        joint.effort
-                    },
-                );
+                link.joint
+                    .data
+                    .set_motor_max_force(joint.axis(), joint.effort);
             }
         }
         let Some(arm) = &self.kinematic else {
@@ -962,6 +965,35 @@ impl Robot {
                     bodies[child_h].add_torque(axis_world * t, true);
                     bodies[parent_h].add_torque(-axis_world * t, true);
                 }
+            }
+        }
+    }
+
+    /// Keeps each multibody joint's limit constraint on only while the joint is past a limit.
+    ///
+    /// Rapier builds a limit constraint for every limited joint every step, each with a solve of
+    /// the arm's mass matrix, though one pushes only once its joint is past a limit (inside, its
+    /// impulse bounds are [0, 0] and it changes no velocity). Switching it on by the same test,
+    /// on the joint position the step starts from, leaves every trajectory bit for bit the same
+    /// (PPO weights after 40k steps identical) and drops 8 of the PD arm's 17 joint constraints:
+    /// physics steps/s, holding 54.1k -> 58.7k (+8 %), grasped 37.0k -> 38.7k (+5 %); medians of
+    /// 3 alternated runs, AMD EPYC. Exact only when the step starts from these positions: one
+    /// solver iteration per step (the caller checks).
+    pub(crate) fn gate_joint_limits(&self, set: &mut MultibodyJointSet) {
+        let Some(mb) = self.multibody_mut(set) else {
+            return;
+        };
+        for joint in &self.joints {
+            if joint.kind == JointKind::Continuous {
+                continue;
+            }
+            let link = mb.link_mut(joint.link_id).expect("link");
+            let q = link.joint.coords()[joint.coord_index()];
+            let axis: JointAxesMask = joint.axis().into();
+            if q < joint.limits.0 || q > joint.limits.1 {
+                link.joint.data.limit_axes |= axis;
+            } else {
+                link.joint.data.limit_axes &= !axis;
             }
         }
     }

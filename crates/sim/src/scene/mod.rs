@@ -441,6 +441,9 @@ impl Scene {
         self.robot
             .apply_joint_torques(&mut w.bodies, &w.multibody_joints);
         self.robot.drive_kinematic(&mut w.bodies, self.params.dt);
+        if self.params.num_solver_iterations == 1 {
+            self.robot.gate_joint_limits(&mut w.multibody_joints);
+        }
         self.pipeline.step(
             self.gravity,
             &self.params,
