@@ -55,7 +55,7 @@ struct RunResult {
     env_id: String,
     seed: u64,
     /// Physics steps per simulated second, for the arm tasks.
-    physics_hz: Option<f64>,
+    physics: Option<String>,
     dir: PathBuf,
     summary: TrainSummary,
     curve: Vec<CurvePoint>,
@@ -139,7 +139,7 @@ fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
         algo: algo.to_string(),
         env_id: policy.env_id().to_string(),
         seed: policy.meta().train_seed,
-        physics_hz: physics_hz(&policy.meta().env, policy.env_id()),
+        physics: physics_label(&policy.meta().env, policy.env_id()),
         dir: dir.to_path_buf(),
         summary,
         curve,
@@ -147,9 +147,10 @@ fn summarise(algo: &str, dir: &Path, episodes: u32) -> Result<RunResult> {
     })
 }
 
-/// The physics rate of a model's arm task: its `scene.physics.dt`, else the scene's default
-/// (models store only the settings their training changed). `None` for tasks without the arm.
-fn physics_hz(env: &serde_json::Value, env_id: &str) -> Option<f64> {
+/// The physics of a model's arm task: its `scene.physics.dt` as a rate (else the scene's default;
+/// models store only the settings their training changed), and "kinematic" when its arm used the
+/// kinematic drive. `None` for tasks without the arm.
+fn physics_label(env: &serde_json::Value, env_id: &str) -> Option<String> {
     if !env_id.starts_with("FaArm") {
         return None;
     }
@@ -157,7 +158,15 @@ fn physics_hz(env: &serde_json::Value, env_id: &str) -> Option<f64> {
         .pointer("/scene/physics/dt")
         .and_then(|v| v.as_f64())
         .unwrap_or(fairgrasp_sim::scene::PhysicsConfig::default().dt as f64);
-    (dt > 0.0).then(|| 1.0 / dt)
+    let kinematic = env.pointer("/scene/arm/drive").and_then(|v| v.as_str()) == Some("kinematic");
+    (dt > 0.0).then(|| {
+        let hz = format!("{:.0} Hz", 1.0 / dt);
+        if kinematic {
+            format!("{hz}, kinematic arm")
+        } else {
+            hz
+        }
+    })
 }
 
 /// The rows of progress.csv that hold an evaluation.
@@ -215,8 +224,9 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
          with its default configuration for its task (configs/<algo>_grasp.toml, \
          configs/ppo_pick_place.toml) within \
          its wall-clock budget (`--minutes`, {} here for runs trained by this command; a run \
-         given with `--run` had its own), stopping early once 49 of 50 evaluation episodes \
-         succeed. The curve is the evaluation during training (deterministic policy, 50 episodes, \
+         given with `--run` had its own budget and may have had its own configuration: the \
+         physics column gives each run's rate and names the kinematic arm drive where it was \
+         used), stopping early once 49 of 50 evaluation episodes succeed. The curve is the evaluation during training (deterministic policy, 50 episodes, \
          seeds 1,000,000…); the last columns evaluate the best model on {} held-out episodes \
          (seeds 2,000,000,000…), as `fairgrasp eval` does.\n",
         command.join(" "),
@@ -243,9 +253,7 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
             r.algo.to_uppercase(),
             r.env_id,
             r.seed,
-            r.physics_hz
-                .map(|hz| format!("{hz:.0} Hz"))
-                .unwrap_or_else(|| "—".into()),
+            r.physics.as_deref().unwrap_or("—"),
             r.summary.num_timesteps as f64 / 1e3,
             wall_time(r.summary.seconds),
             r.summary.fps,
@@ -398,15 +406,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn physics_rate_is_the_models_or_the_scenes_default() {
-        let rate = |env: serde_json::Value, id: &str| physics_hz(&env, id).map(f64::round);
+    fn physics_is_the_models_rate_and_drive_or_the_scenes_default() {
+        let label = |env: serde_json::Value, id: &str| physics_label(&env, id);
         let at_120 = serde_json::json!({ "scene": { "physics": { "dt": 1.0 / 120.0 } } });
-        assert_eq!(rate(at_120, "FaArmGrasp-v0"), Some(120.0));
+        assert_eq!(label(at_120, "FaArmGrasp-v0").as_deref(), Some("120 Hz"));
         assert_eq!(
-            rate(serde_json::json!({}), "FaArmPickPlace-v0"),
-            Some(240.0)
+            label(serde_json::json!({}), "FaArmPickPlace-v0").as_deref(),
+            Some("240 Hz")
         );
-        assert_eq!(rate(serde_json::json!({}), "Pendulum-v1"), None);
+        let kinematic = serde_json::json!({ "scene": { "arm": { "drive": "kinematic" } } });
+        assert_eq!(
+            label(kinematic, "FaArmGrasp-v0").as_deref(),
+            Some("240 Hz, kinematic arm")
+        );
+        assert_eq!(label(serde_json::json!({}), "Pendulum-v1"), None);
         assert_eq!(short_task("FaArmPickPlace-v0"), "PickPlace");
         assert_eq!(short_task("Pendulum-v1"), "Pendulum");
         assert_eq!(wall_time(37.1), "37 s");
