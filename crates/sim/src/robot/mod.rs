@@ -899,7 +899,7 @@ impl Robot {
                     // A motor without gains pushes nothing, but rapier would still build and
                     // solve a constraint for it (with a mass-matrix solve): off instead, with
                     // the same trajectory. The mimic finger's motor is one, and every motor in
-                    // torque control (holding 58.7k -> 59.2k steps/s).
+                    // torque control (holding 58.7k -> 59.9k steps/s, grasped 38.4k -> 39.6k).
                     link.joint.data.motor_axes &= !JointAxesMask::from(joint.axis());
                     continue;
                 }
@@ -976,9 +976,9 @@ impl Robot {
     /// impulse bounds are [0, 0] and it changes no velocity). Switching it on by the same test,
     /// on the joint position the step starts from, leaves every trajectory bit for bit the same
     /// (PPO weights after 40k steps identical) and drops 8 of the PD arm's 17 joint constraints:
-    /// physics steps/s, holding 54.1k -> 58.7k (+8 %), grasped 37.0k -> 38.7k (+5 %); medians of
-    /// 3 alternated runs, AMD EPYC. Exact only when the step starts from these positions: one
-    /// solver iteration per step (the caller checks).
+    /// physics steps/s, holding 54.8k -> 58.7k (+7 %), grasped 37.3k -> 38.4k (+3 %); medians of
+    /// 5 alternated runs, quiet AMD EPYC host. Exact only when the step starts from these
+    /// positions: one solver iteration per step (the caller checks).
     pub(crate) fn gate_joint_limits(&self, set: &mut MultibodyJointSet) {
         let Some(mb) = self.multibody_mut(set) else {
             return;
