@@ -67,9 +67,17 @@ impl GraspSettings {
     /// holding for `success_hold_steps` consecutive control steps; the deployment loop applies
     /// the same rule to its estimated states.
     pub fn holds(&self, state: &ArmState) -> bool {
-        state.grasped(0)
-            && state.lift(0) > self.success_min_lift as f64
-            && state.tcp_to_object(0).norm() < self.success_max_offset as f64
+        self.holds_for(
+            state.grasped(0),
+            state.lift(0),
+            state.tcp_to_object(0).norm(),
+        )
+    }
+
+    /// [`Self::holds`] on the values already read from a state (object 0 grasped, its lift
+    /// and its distance from the TCP, m).
+    fn holds_for(&self, grasped: bool, lift: f64, distance: f64) -> bool {
+        grasped && lift > self.success_min_lift as f64 && distance < self.success_max_offset as f64
     }
 }
 
@@ -302,7 +310,9 @@ impl Task for Grasp {
         let grasped = state.grasped(0);
         let lift = state.lift(0);
         let distance = state.tcp_to_object(0).norm();
-        let streak = self.streak.update(self.settings.holds(state));
+        let streak = self
+            .streak
+            .update(self.settings.holds_for(grasped, lift, distance));
         Evaluation {
             success: streak >= self.settings.success_hold_steps,
             failure: scene
