@@ -185,7 +185,13 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         log,
         interrupt,
     )?;
-    if let Some(why) = deployment.motion_mismatch() {
+    for why in [
+        deployment.motion_mismatch(),
+        deployment.observation_mismatch(),
+    ]
+    .into_iter()
+    .flatten()
+    {
         eprintln!("warning: {why}");
     }
     println!(

@@ -129,19 +129,26 @@ impl Calibration {
 
     /// Simulator joint angles (rad) for robot joint angles (deg).
     pub fn to_sim(&self, robot_deg: &[f64; 6]) -> Vec<f32> {
-        self.joints
-            .iter()
-            .zip(robot_deg)
-            .map(|(j, &d)| ((d - j.offset_deg) / j.sign as f64).to_radians() as f32)
+        (self.to_sim_deg(robot_deg).iter())
+            .map(|d| d.to_radians() as f32)
             .collect()
     }
 
-    /// Joint speeds: robot deg/s → simulator rad/s.
-    pub fn speeds_to_sim(&self, robot_deg_s: &[f64; 6]) -> Vec<f32> {
+    /// Simulator joint angles in degrees for robot joint angles (deg).
+    pub fn to_sim_deg(&self, robot_deg: &[f64; 6]) -> Vec<f64> {
+        self.joints
+            .iter()
+            .zip(robot_deg)
+            .map(|(j, &d)| (d - j.offset_deg) / j.sign as f64)
+            .collect()
+    }
+
+    /// Joint speeds: robot deg/s → simulator deg/s.
+    pub fn speeds_to_sim_deg(&self, robot_deg_s: &[f64; 6]) -> Vec<f64> {
         self.joints
             .iter()
             .zip(robot_deg_s)
-            .map(|(j, &d)| (d / j.sign as f64).to_radians() as f32)
+            .map(|(j, &d)| d / j.sign as f64)
             .collect()
     }
 

@@ -38,6 +38,8 @@ struct Shared {
     after: usize,
     /// When the fault became visible to the loop.
     fault_at: Option<Instant>,
+    /// How long each ServoJ takes to answer.
+    servo_reply: Duration,
 }
 
 #[derive(Clone)]
@@ -59,7 +61,14 @@ impl MockRobot {
             trouble,
             after,
             fault_at: None,
+            servo_reply: Duration::ZERO,
         })))
+    }
+
+    /// Every ServoJ answers `reply` after it is sent.
+    fn slow(self, reply: Duration) -> Self {
+        self.0.lock().unwrap().servo_reply = reply;
+        self
     }
 
     fn calls(&self) -> Vec<(Instant, RobotCommand)> {
@@ -92,6 +101,10 @@ impl RobotLink for MockRobot {
     }
 
     fn send(&mut self, command: &RobotCommand) -> Result<()> {
+        if matches!(command, RobotCommand::ServoJ { .. }) {
+            let reply = self.0.lock().unwrap().servo_reply;
+            std::thread::sleep(reply);
+        }
         let mut s = self.0.lock().unwrap();
         s.calls.push((Instant::now(), command.clone()));
         match command {
@@ -134,14 +147,24 @@ impl EpisodeHost for Counting {
 }
 
 fn deployment(robot: &MockRobot, live: bool, steps: u32) -> (Deployment, Arc<AtomicBool>) {
+    deployment_of(robot, live, steps, 2)
+}
+
+fn deployment_of(
+    robot: &MockRobot,
+    live: bool,
+    steps: u32,
+    episodes: u32,
+) -> (Deployment, Arc<AtomicBool>) {
     let policy = Policy::load(&model_dir()).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let calibration = Calibration::identity(&io.limits_rad);
     let interrupt = Arc::new(AtomicBool::new(false));
     let options = DeployOptions {
         live,
-        episodes: 2,
+        episodes,
         max_steps: Some(steps),
+        end_at_success: false,
         safety: SafetyConfig {
             speed_scale: 1.0,
             ..SafetyConfig::default()
@@ -179,7 +202,8 @@ fn a_live_run_enables_homes_and_streams_servo_set_points() {
     let robot = MockRobot::new(home(), Trouble::None, 0);
     let (mut d, _) = deployment(&robot, true, 6);
     let ticks = d.servo_ticks() as usize;
-    assert_eq!(ticks, 4, "1/30 s control over 8 ms servo periods");
+    assert_eq!(ticks, 5, "1/30 s control in servo periods of at most 8 ms");
+    assert!((d.servo_period().as_secs_f64() - 1.0 / 150.0).abs() < 1e-9);
     let mut host = Counting(0);
     let report = d.run(&mut host, &mut cube()).unwrap();
     assert!(report.fault.is_none(), "{:?}", report.fault);
@@ -199,6 +223,41 @@ fn a_live_run_enables_homes_and_streams_servo_set_points() {
     let servos = first_episode.iter().filter(|n| **n == "ServoJ").count();
     assert_eq!(servos, 6 * ticks);
     assert_eq!(names.iter().filter(|n| **n == "ServoMoveEnd").count(), 2);
+}
+
+#[test]
+fn the_servo_stream_keeps_its_period_when_replies_are_slower_than_it() {
+    // Each ServoJ answers after 10 ms, longer than the 6.67 ms servo period: 200 control steps,
+    // 1,000 servo ticks. A loop that waits for each reply before the next tick takes 10 s;
+    // the fixed schedule covers the ticks it missed with the next set point (cmdT two periods).
+    let robot = MockRobot::new(home(), Trouble::None, 0).slow(Duration::from_millis(10));
+    let (mut d, _) = deployment_of(&robot, true, 200, 1);
+    let (ticks, period) = (d.servo_ticks() as u64, d.servo_period().as_secs_f64());
+    let report = d.run(&mut Counting(0), &mut cube()).unwrap();
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    let calls = robot.calls();
+    let servos: Vec<(Instant, f64)> = (calls.iter())
+        .filter_map(|(t, c)| match c {
+            RobotCommand::ServoJ { cmd_t, .. } => Some((*t, *cmd_t)),
+            _ => None,
+        })
+        .collect();
+    // Every tick of the 200 steps is covered by a set point, none given up.
+    let covered: f64 = servos
+        .iter()
+        .map(|(_, cmd_t)| (cmd_t / period).round())
+        .sum();
+    assert_eq!(covered as u64, 200 * ticks);
+    // The ticks kept their schedule: a send goes out once the last tick it covers is due.
+    let span = (servos.last().unwrap().0 - servos[0].0).as_secs_f64();
+    let measured_period = span / (covered - 1.0);
+    assert!(
+        (measured_period / period - 1.0).abs() < 0.05,
+        "measured {:.3} ms per tick against {:.3} ms",
+        measured_period * 1000.0,
+        period * 1000.0
+    );
+    assert!(servos.iter().all(|(_, cmd_t)| *cmd_t <= 0.016 + 1e-12));
 }
 
 #[test]

@@ -21,6 +21,9 @@ pub struct EvalResult {
     /// (`fraction_sorted`, `lift`, …).
     #[serde(default)]
     pub final_extras: NamedValues,
+    /// Measured on the validation seeds of a confirmation (`eval.confirm_episodes`).
+    #[serde(default)]
+    pub confirmed: bool,
 }
 
 /// Something that acts: one raw observation in, one action out (it normalises, if the model
@@ -88,6 +91,7 @@ fn summarize(outcomes: &[EpisodeOutcome], episodes: u32) -> EvalResult {
         mean_length: total_length as f32 / n,
         episodes,
         final_extras,
+        confirmed: false,
     }
 }
 

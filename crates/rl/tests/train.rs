@@ -370,3 +370,58 @@ fn eval_record_writes_a_gif_of_an_evaluation_episode_per_evaluation() {
         std::fs::read(plain.path().join("best/model.safetensors")).unwrap()
     );
 }
+
+#[test]
+fn the_wilson_lower_bound_matches_its_formula() {
+    use fairgrasp_rl::train::wilson_lower_bound;
+    // Reference values from the closed form (z = 1.96).
+    for (s, n, want) in [
+        (200, 200, 0.98115),
+        (197, 200, 0.95683),
+        (196, 200, 0.94971),
+        (49, 50, 0.89505),
+    ] {
+        let got = wilson_lower_bound(s, n);
+        assert!((got - want).abs() < 1e-4, "{s}/{n}: {got}");
+    }
+    assert_eq!(wilson_lower_bound(0, 10), 0.0);
+    assert_eq!(wilson_lower_bound(0, 0), 0.0);
+}
+
+#[test]
+fn a_threshold_stop_waits_for_its_confirmation_on_validation_seeds() {
+    // The threshold (0) is reached at every evaluation; the confirmation's bound decides.
+    let run = |bound: f32| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut config = tiny_config(2048);
+        config.checkpoint_freq = 0;
+        config.eval.success_threshold = Some(0.0);
+        config.eval.confirm_episodes = 3;
+        config.eval.confirm_lower_bound = bound;
+        let summary = train(&config, dir.path(), |_| {}).unwrap();
+        let tb = std::fs::read_dir(dir.path().join("tb"))
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let scalars = read_scalars(&tb).unwrap();
+        let confirmations = scalars
+            .iter()
+            .filter(|s| s.tag == "eval/confirmed_lower_bound")
+            .count();
+        (summary, confirmations)
+    };
+    // A bound of 0 holds at the first evaluation: the run stops there, its best confirmed.
+    let (stopped, confirmations) = run(0.0);
+    assert!(stopped.reached_threshold);
+    assert_eq!(stopped.num_timesteps, 512);
+    assert_eq!(confirmations, 1);
+    let best = stopped.best.unwrap();
+    assert!(best.confirmed && best.episodes == 3, "{best:?}");
+    // No 3 episodes give a lower bound of 1: every evaluation is confirmed, none stops it.
+    let (ran_on, confirmations) = run(1.0);
+    assert!(!ran_on.reached_threshold);
+    assert_eq!(ran_on.num_timesteps, 2048);
+    assert_eq!(confirmations, 4);
+}

@@ -12,13 +12,15 @@
 //! exit, Ctrl-C — stops the arm (StopMotion, ServoMoveEnd) at once and ends the run with that
 //! fault; nothing moves the arm afterwards ([`GuardedLink`]).
 
+mod clock;
 mod estimate;
 mod guard;
 mod hosts;
 mod log;
 mod model_io;
 
-pub use estimate::StateEstimator;
+pub use clock::{MAX_CMD_T, ServoClock};
+pub use estimate::ArmReader;
 pub use guard::{GuardedLink, describe};
 pub use hosts::{OperatorHost, TwinHost};
 pub use log::JsonLog;
@@ -113,6 +115,10 @@ pub struct Deployment {
     options: DeployOptions,
     interrupt: Arc<AtomicBool>,
     servo_ticks: u32,
+    /// The servo period: the control period over the speed scale, divided evenly into
+    /// `servo_ticks` periods of at most the configured one (6.67 ms at scale 1), so that a
+    /// late send can cover two within the controller's longest cmdT.
+    tick: Duration,
 }
 
 impl Deployment {
@@ -132,15 +138,18 @@ impl Deployment {
         }
         let io = ModelIo::for_policy(&policy)?;
         let fk = tcp_forward_kinematics(io.chain.clone(), calibration.clone());
+        let servo = options.safety.servo_period_ms / 1000.0;
+        let step = io.control_period / options.safety.speed_scale;
+        let servo_ticks = ((step / servo - 1e-9).ceil() as u32).max(1);
+        let tick = step / servo_ticks as f64;
+        let mut safety = options.safety.clone();
+        safety.servo_period_ms = tick * 1000.0;
         let filter = SafetyFilter::new(
-            &options.safety,
+            &safety,
             &calibration.soft_limits(),
             io.nominal.table_z * 1000.0,
             fk,
         )?;
-        let servo = options.safety.servo_period_ms / 1000.0;
-        let servo_ticks =
-            ((io.control_period / options.safety.speed_scale / servo).round() as u32).max(1);
         let watchdog = Watchdog::new(
             Duration::from_secs_f64(options.safety.state_deadline_ms / 1000.0),
             crate::fairino::error_codes::error_code_meaning,
@@ -155,19 +164,31 @@ impl Deployment {
             options,
             interrupt,
             servo_ticks,
+            tick: Duration::from_secs_f64(tick),
         })
     }
 
-    /// Servo periods per control step (the control period over the speed scale, over 8 ms,
-    /// rounded).
+    /// Servo periods per control step (the control period over the speed scale, over the
+    /// configured servo period, rounded up).
     pub fn servo_ticks(&self) -> u32 {
         self.servo_ticks
+    }
+
+    /// The servo period: the control period over the speed scale, over [`Self::servo_ticks`].
+    pub fn servo_period(&self) -> Duration {
+        self.tick
     }
 
     /// Why the arm will not move as the policy learnt, if it will not
     /// ([`ModelIo::motion_mismatch`]).
     pub fn motion_mismatch(&self) -> Option<String> {
         self.io.motion_mismatch(&self.options.safety)
+    }
+
+    /// Why the policy will read the arm differently from how it learnt, if it will
+    /// ([`ModelIo::observation_mismatch`]).
+    pub fn observation_mismatch(&self) -> Option<String> {
+        self.io.observation_mismatch()
     }
 
     /// The home pose in robot degrees.
@@ -335,48 +356,50 @@ impl Deployment {
         self.filter.start(&start.state.joints_deg)?;
         self.link.send(&RobotCommand::ServoMoveStart)?;
 
-        let mut estimator = StateEstimator::new(self.options.safety.speed_scale);
+        let mut reader = ArmReader::new(self.options.safety.speed_scale);
         let mut closing = false;
-        let now = Instant::now();
-        let state = estimator.estimate(
+        let mut state = reader.estimate(
             &self.io,
             &self.calibration,
             &start.state,
             &object,
             closing,
-            now,
+            Instant::now(),
         );
         let mut command = self.io.hold(&state);
         let mut shown = vec![0.0; self.policy.act_dim()];
-        let servo = Duration::from_secs_f64(self.options.safety.servo_period_ms / 1000.0);
-        let cmd_t = self.options.safety.servo_period_ms / 1000.0;
         let steps = self.options.max_steps.unwrap_or(self.io.max_steps);
         let mut ik_failures = 0;
-        let mut deadline = Instant::now();
         let rule = self.io.task().clone();
         let mut streak = Streak::default();
         let mut acted = steps;
+        let mut clock = ServoClock::new(Instant::now(), self.tick);
         for step in 0..steps {
-            let reading = self.checked_state()?;
-            if let Some(p) = pose
-                .latest()
-                .map_err(|e| Fault::StreamFailed(format!("object pose: {e}")))?
-            {
-                object = p.message;
-            }
-            let state = estimator.estimate(
-                &self.io,
-                &self.calibration,
-                &reading.state,
-                &object,
-                closing,
-                Instant::now(),
-            );
-            if self.options.end_at_success
-                && streak.update(rule.holds(&state)) >= rule.success_hold_steps
-            {
-                acted = step;
-                break;
+            if step > 0 {
+                // The step begins when its first tick is due: the policy acts at its trained
+                // period however the replies went.
+                clock.wait();
+                let reading = self.checked_state()?;
+                if let Some(p) = pose
+                    .latest()
+                    .map_err(|e| Fault::StreamFailed(format!("object pose: {e}")))?
+                {
+                    object = p.message;
+                }
+                state = reader.estimate(
+                    &self.io,
+                    &self.calibration,
+                    &reading.state,
+                    &object,
+                    closing,
+                    Instant::now(),
+                );
+                if self.options.end_at_success
+                    && streak.update(rule.holds(&state)) >= rule.success_hold_steps
+                {
+                    acted = step;
+                    break;
+                }
             }
             let obs = self.io.observe(&state, &shown);
             let output = self.policy.act(&obs, true).map_err(|e| Fault::CallFailed {
@@ -404,23 +427,22 @@ impl Deployment {
                 self.gripper(command.gripper_open)?;
             }
             let target = self.calibration.to_robot(&command.arm_target);
-            for k in 1..=self.servo_ticks {
-                if k > 1 {
+            let until = (step as u64 + 1) * self.servo_ticks as u64;
+            let mut first = true;
+            while clock.taken() < until {
+                if !first {
                     self.checked_state()?;
                 }
-                let set_point = self.filter.next(&target)?;
+                first = false;
+                let n = clock.take(until);
+                let mut set_point = self.filter.next(&target)?;
+                for _ in 1..n {
+                    set_point = self.filter.next(&target)?;
+                }
                 self.link.send(&RobotCommand::ServoJ {
                     joints_deg: set_point,
-                    cmd_t,
+                    cmd_t: (self.tick.as_secs_f64() * n as f64).min(MAX_CMD_T),
                 })?;
-                deadline += servo;
-                let now = Instant::now();
-                if deadline > now {
-                    std::thread::sleep(deadline - now);
-                } else {
-                    // Late (a slow call): do not try to catch up with a burst.
-                    deadline = now;
-                }
             }
         }
         self.link.send(&RobotCommand::ServoMoveEnd)?;

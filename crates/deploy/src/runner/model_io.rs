@@ -5,7 +5,7 @@
 use crate::error::{DeployError, Result};
 use crate::safety::SafetyConfig;
 use fairgrasp_env::arm::ServoConfig;
-use fairgrasp_env::arm::{ActionMode, ArmState, Command};
+use fairgrasp_env::arm::{ActionMode, ArmState, Command, EstimatorFacts};
 use fairgrasp_env::sim::kinematics::SerialChain;
 use fairgrasp_env::sim::scene::ArmDrive;
 use fairgrasp_env::tasks::grasp::GraspSettings;
@@ -20,6 +20,8 @@ pub struct ModelIo {
     pub chain: SerialChain,
     /// The state of the freshly reset env: home pose, table, object's size and rest height.
     pub nominal: ArmState,
+    /// What the state estimator knows beyond the controller's readings.
+    pub facts: EstimatorFacts,
     pub control_period: f64,
     pub max_steps: u32,
     pub limits_rad: Vec<(f32, f32)>,
@@ -77,8 +79,10 @@ impl ModelIo {
             .state()
             .cloned()
             .ok_or_else(|| DeployError::Other("the model's env has no state".into()))?;
+        let chain = SerialChain::new(&scene.robot().model, "tcp")?;
         Ok(Self {
-            chain: SerialChain::new(&scene.robot().model, "tcp")?,
+            facts: EstimatorFacts::new(chain.clone(), &nominal),
+            chain,
             control_period: scene.control_period() as f64,
             max_steps: inner.config().task.max_episode_steps,
             limits_rad: scene.arm_limits(),
@@ -134,6 +138,19 @@ impl ModelIo {
                 "the model trained with caps of {} deg/s and {} deg/s²; the safety settings                  allow {} deg/s and {} deg/s² at scale 1, so the arm will not move as it learnt",
                 trained.0, trained.1, here.0, here.1
             )
+        })
+    }
+
+    /// Why the policy will read the arm differently from how it learnt, if it will: a model
+    /// trained on the simulator's true state (without `[readings]`) saw true pad contacts and
+    /// exact openings that the deployment only infers.
+    pub fn observation_mismatch(&self) -> Option<String> {
+        (!self.env.inner().config().readings.enabled).then(|| {
+            "this model observed the simulator's true state in training, not the controller's \
+             readings the deployment builds its observation from (pad contacts, the gripper in \
+             whole percent, the object's feed); expect it to grasp less often than in simulation \
+             (train with configs/ppo_deploy.toml: docs/deployment.md)"
+                .into()
         })
     }
 

@@ -669,7 +669,9 @@ impl Controller {
             emergency_stop: self.estop,
             safety_stop: self.safety,
             enabled: self.enabled,
-            gripper_position: self.gripper.position.round().clamp(0.0, 100.0) as u8,
+            gripper_position: fairgrasp_env::arm::readings::gripper_percent_of(
+                self.gripper.position,
+            ),
             gripper_motion_done: self.gripper.done,
             gripper_active: self.gripper.active,
             gripper_fault: 0,

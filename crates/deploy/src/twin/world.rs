@@ -268,23 +268,28 @@ impl World {
 
     /// What the controller's encoders and the gripper read now.
     pub fn measure(&self) -> Measured {
-        let scene = self.scene();
-        let q = scene.arm_positions();
-        let qd = scene.arm_velocities();
-        let deg = |v: &[f32]| -> [f64; 6] {
-            std::array::from_fn(|j| (v.get(j).copied().unwrap_or(0.0) as f64).to_degrees())
-        };
-        Measured {
-            joints_deg: deg(&q),
-            joint_speeds_deg: deg(&qd),
-            gripper_percent: (scene.gripper_opening() / scene.max_opening()) as f64 * 100.0,
-        }
+        measure(self.scene())
     }
 
     /// Object 0's pose in the robot base frame (m).
     pub fn object_pose(&self) -> Option<Isometry3<f64>> {
         let scene = self.scene();
         (scene.num_objects() > 0).then(|| scene.base_pose().inverse() * scene.object_state(0).pose)
+    }
+}
+
+/// What a controller's encoders and gripper read of a simulated scene: joint angles and speeds
+/// in degrees, the opening in percent of the stroke (the controller rounds it when reporting).
+pub fn measure(scene: &Scene) -> Measured {
+    let q = scene.arm_positions();
+    let qd = scene.arm_velocities();
+    let deg = |v: &[f32]| -> [f64; 6] {
+        std::array::from_fn(|j| (v.get(j).copied().unwrap_or(0.0) as f64).to_degrees())
+    };
+    Measured {
+        joints_deg: deg(&q),
+        joint_speeds_deg: deg(&qd),
+        gripper_percent: (scene.gripper_opening() / scene.max_opening()) as f64 * 100.0,
     }
 }
 

@@ -2,6 +2,7 @@
 //! around the task's own `[task]` and `[reward]` sections.
 
 use crate::arm::control::ControlConfig;
+use crate::arm::readings::ReadingsConfig;
 use crate::config::{check_non_negative, check_range};
 use crate::core::RenderMode;
 use crate::error::{EnvError, Result};
@@ -279,6 +280,8 @@ pub struct ArmEnvConfig<T, R> {
     pub shapes: ShapesConfig,
     /// The camera of the `rgb_array` and `depth_array` render modes (unused otherwise).
     pub render: CameraConfig,
+    /// The policy's observation from synthesized controller readings, as on the arm.
+    pub readings: ReadingsConfig,
 }
 
 impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
@@ -295,6 +298,7 @@ impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
         self.reward.validate()?;
         self.randomization.validate()?;
         self.shapes.validate()?;
+        self.readings.validate()?;
         Camera::new(self.render.clone())?;
         Ok(())
     }

@@ -6,12 +6,15 @@
 //! - [`state`]: [`ArmState`], the plain state observations are computed from;
 //! - [`control`]: [`ActionMapper`], action → joint targets;
 //! - [`servo`]: [`JointRamp`], joint targets → capped set points (the deployment's motion);
+//! - [`readings`]: [`StateEstimator`], controller readings → the policy's state (the
+//!   deployment's observation);
 //! - [`observation`]: [`ObsWriter`] and noise groups;
 //! - [`config`]: [`ArmEnvConfig`], the shared configuration sections.
 
 pub mod config;
 pub mod control;
 pub mod observation;
+pub mod readings;
 pub mod servo;
 pub mod state;
 
@@ -21,6 +24,7 @@ pub use config::{
 };
 pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
 pub use observation::{NoiseGroup, ObsWriter};
+pub use readings::{ControllerReading, EstimatorFacts, ReadingsConfig, StateEstimator};
 pub use servo::{JointRamp, ServoConfig};
 pub use state::{ArmState, ObjectReading};
 
@@ -30,6 +34,7 @@ use crate::spaces::BoxSpace;
 use fairgrasp_render::Renderer;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::kinematics::SerialChain;
+use fairgrasp_sim::rapier3d::na::Isometry3;
 use fairgrasp_sim::scene::{PhysicalParams, Scene, SceneConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -106,12 +111,24 @@ struct Episode {
     last_obs: Vec<f32>,
     /// The servo set points (physical joints, rad), when `[control.servo]` is on.
     ramp: Option<JointRamp>,
+    /// With `[readings]`: the estimator and the state it built from this step's readings,
+    /// which the policy and the action mapping see.
+    estimator: Option<StateEstimator>,
+    observed: Option<ArmState>,
 }
 
 impl Episode {
-    /// What the policy and the action mapping see.
+    /// The state as the controller reports it.
     fn reported_state(&self) -> &ArmState {
         self.reported.as_ref().unwrap_or(&self.state)
+    }
+
+    /// What the policy and the action mapping see.
+    fn view(&self) -> &ArmState {
+        self.observed
+            .as_ref()
+            .or(self.reported.as_ref())
+            .unwrap_or(&self.state)
     }
 }
 
@@ -140,6 +157,9 @@ pub struct ArmEnv<T: Task> {
     episode: Option<Episode>,
     /// Built at the first image render, so that environments that never render pay nothing.
     renderer: Option<Renderer>,
+    /// What the state estimator knows beyond the readings (`[readings]`): the chain, the table,
+    /// the gripper's stroke and this episode's object.
+    facts: EstimatorFacts,
 }
 
 /// The controller's view of `state` under joint offsets `offset`: reported joints and the TCP
@@ -174,7 +194,7 @@ impl<T: Task> ArmEnv<T> {
         T::configure_scene(&config, &mut scene_config)?;
         let scene = Scene::new(scene_config)?;
         let chain = SerialChain::new(&scene.robot().model, "tcp")?;
-        let mapper = ActionMapper::new(config.control.clone(), chain, scene.arm_limits())?;
+        let mapper = ActionMapper::new(config.control.clone(), chain.clone(), scene.arm_limits())?;
         let task = T::new(&config, &scene)?;
         let action_space = mapper.action_space();
         let robot = scene.robot();
@@ -190,6 +210,7 @@ impl<T: Task> ArmEnv<T> {
             .collect();
         // Write one observation to learn its length and noise groups.
         let state = ArmState::from_scene(&scene);
+        let facts = EstimatorFacts::new(chain.clone(), &state);
         let (mut obs, mut noise_groups) = (Vec::new(), Vec::new());
         let zeros = vec![0.0; action_space.dim()];
         task.observe(
@@ -214,6 +235,7 @@ impl<T: Task> ArmEnv<T> {
             config,
             episode: None,
             renderer: None,
+            facts,
         })
     }
 
@@ -262,6 +284,17 @@ impl<T: Task> ArmEnv<T> {
     /// [`Self::state`] unless joint offsets are drawn (see [`ArmEnv`]).
     pub fn reported_state(&self) -> Option<&ArmState> {
         self.episode.as_ref().map(Episode::reported_state)
+    }
+
+    /// The state the last observation was computed from: with `[readings]` the one estimated
+    /// from synthesized controller readings, else [`Self::reported_state`].
+    pub fn observed_state(&self) -> Option<&ArmState> {
+        self.episode.as_ref().map(Episode::view)
+    }
+
+    /// What the state estimator knows beyond the readings, for this episode's object.
+    pub fn estimator_facts(&self) -> &EstimatorFacts {
+        &self.facts
     }
 
     /// This episode's joint calibration errors (rad; empty when none are drawn).
@@ -374,6 +407,34 @@ impl<T: Task> ArmEnv<T> {
         obs
     }
 
+    /// The state the policy sees with `[readings]`: the reported state read as a controller
+    /// reports it, the object's pose from a feed of the configured rate (drawn age), through
+    /// the estimator. `before` is object 0's true pose one control step earlier.
+    fn estimate(
+        &mut self,
+        estimator: &mut StateEstimator,
+        view: &ArmState,
+        before: &Isometry3<f64>,
+        gripper_closing: bool,
+        dt: f64,
+    ) -> ArmState {
+        let reading = ControllerReading::synthesize(
+            &view.q,
+            &view.qd,
+            view.gripper_opening,
+            view.gripper_max_opening,
+        );
+        let max_age = self.config.readings.max_object_age();
+        let now = view.objects[0].pose;
+        let pose = if max_age > 0.0 && dt > 0.0 {
+            let age = max_age * self.rng.random::<f64>();
+            readings::aged_pose(before, &now, age, dt)
+        } else {
+            now
+        };
+        estimator.estimate(&self.facts, &reading, pose, gripper_closing, dt)
+    }
+
     fn no_op_action(&self) -> Vec<f32> {
         let mut a = vec![0.0; self.action_space.dim()];
         *a.last_mut().expect("action has a gripper entry") = 1.0;
@@ -470,7 +531,16 @@ impl<T: Task> Env for ArmEnv<T> {
         let joint_offset = self.draw_joint_offset(&mut params);
         let state = ArmState::from_scene(&self.scene);
         let reported = reported(&self.mapper, &state, &joint_offset);
-        let view = reported.as_ref().unwrap_or(&state);
+        let (mut estimator, mut observed) = (None, None);
+        if self.config.readings.enabled {
+            self.facts.object = state.objects[0].clone();
+            let mut e = StateEstimator::new();
+            let view = reported.as_ref().unwrap_or(&state);
+            let pose = state.objects[0].pose;
+            observed = Some(self.estimate(&mut e, view, &pose, false, 0.0));
+            estimator = Some(e);
+        }
+        let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
         let mut targets = self.scene.arm_targets();
         for (t, e) in targets.iter_mut().zip(&joint_offset) {
             *t += e;
@@ -490,6 +560,8 @@ impl<T: Task> Env for ArmEnv<T> {
             reported,
             last_obs: obs.clone(),
             ramp,
+            estimator,
+            observed,
         });
         Ok((
             obs,
@@ -519,7 +591,9 @@ impl<T: Task> Env for ArmEnv<T> {
         // Control latency: the action applied now was chosen `latency` steps ago.
         episode.pending.push_back(clipped);
         let applied = episode.pending.pop_front().expect("just pushed");
-        let view = episode.reported.as_ref().unwrap_or(&episode.state);
+        let view = (episode.observed.as_ref())
+            .or(episode.reported.as_ref())
+            .unwrap_or(&episode.state);
         if let Some(MappingEvent::IkFailed) =
             self.mapper.apply(view, &applied, &mut episode.command)
         {
@@ -555,7 +629,19 @@ impl<T: Task> Env for ArmEnv<T> {
             .collect();
         let state = ArmState::from_scene(&self.scene);
         let reported = reported(&self.mapper, &state, &episode.joint_offset);
-        let obs = self.observe(reported.as_ref().unwrap_or(&state), &normalised);
+        let closing = !episode.command.gripper_open;
+        let before = episode.state.objects.first().map(|o| o.pose);
+        let mut estimator = episode.estimator.take();
+        let observed = match (estimator.as_mut(), before) {
+            (Some(e), Some(before)) => {
+                let view = reported.as_ref().unwrap_or(&state);
+                let dt = self.scene.control_period() as f64;
+                Some(self.estimate(e, view, &before, closing, dt))
+            }
+            _ => None,
+        };
+        let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
+        let obs = self.observe(view, &normalised);
         if obs.iter().any(|v| !v.is_finite()) {
             return Ok(self.non_finite_step());
         }
@@ -571,6 +657,8 @@ impl<T: Task> Env for ArmEnv<T> {
         episode.last_obs.clone_from(&obs);
         episode.state = state;
         episode.reported = reported;
+        episode.estimator = estimator;
+        episode.observed = observed;
         events.extend(evaluation.failure);
         Ok(Step {
             obs,
