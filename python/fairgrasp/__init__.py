@@ -14,7 +14,10 @@ know:
       PPO("MlpPolicy", fairgrasp.make_vec_env("FaArmGrasp-v0", 8)).learn(100_000)
 
 - :class:`Policy`: a model trained by ``fairgrasp train``; ``predict`` as in SB3;
-- :func:`train` and :func:`evaluate`: the native trainer and evaluator.
+- :func:`train` and :func:`evaluate`: the native trainer and evaluator;
+- :class:`PolicyDriver`: a saved model driven exactly as ``fairgrasp deploy`` drives it (state
+  estimator, observation, action mapping, set-point ramp, success rule), fed by readings from
+  any simulator (``bench/sim2sim`` runs it on the cell in MuJoCo).
 
 Settings are the env's TOML keys (``fairgrasp env config --env ID`` lists them): nested dicts
 for sections or dotted keys (``**{"control.action_mode": "cartesian"}``). Actions are in [-1, 1]
@@ -22,7 +25,14 @@ by default (``rescale_action=True``), as the native trainer learns them; pass
 ``rescale_action=False`` for the env's own units (joint-angle deltas in radians, ...).
 """
 
-from fairgrasp._native import ActionError, ConfigError, ModelError, __version__, list_envs
+from fairgrasp._native import (
+    ActionError,
+    ConfigError,
+    ModelError,
+    PolicyDriver,
+    __version__,
+    list_envs,
+)
 from fairgrasp.envs import FairgraspEnv, env_config, make, register_envs
 from fairgrasp.policy import Policy
 from fairgrasp.training import default_train_config, evaluate, train
@@ -48,6 +58,7 @@ __all__ = [
     "FairgraspVectorEnv",
     "ModelError",
     "Policy",
+    "PolicyDriver",
     "__version__",
     "default_train_config",
     "env_config",

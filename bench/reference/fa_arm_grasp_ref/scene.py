@@ -16,8 +16,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
-from pybullet_utils import bullet_client
+
+try:
+    import pybullet as p
+    from pybullet_utils import bullet_client
+except ImportError:  # The MuJoCo cell (mujoco_scene, sim2sim) reads the settings without it.
+    p = bullet_client = None
 
 ARM_JOINTS = ["j1", "j2", "j3", "j4", "j5", "j6"]
 FINGER_JOINTS = ["left_finger_joint", "right_finger_joint"]
@@ -123,6 +127,8 @@ class GraspScene:
     """FR5 + gripper + table + cube in one PyBullet DIRECT client of its own."""
 
     def __init__(self, settings: SceneSettings, root: Path | None = None):
+        if p is None:
+            raise ImportError("the PyBullet reference needs pybullet (bench/reference/requirements.txt)")
         root = root or repo_root()
         self.settings = s = settings
         self.client = bullet_client.BulletClient(connection_mode=p.DIRECT)

@@ -36,10 +36,15 @@ pub struct EvalArgs {
     /// (the Python package, an ONNX export) with this one.
     #[arg(long, value_name = "FILE.jsonl")]
     pub trace: Option<PathBuf>,
+    #[command(flatten)]
+    pub deployment: crate::eval_deployment::DeploymentEvalArgs,
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
+    if args.deployment.deployment {
+        return crate::eval_deployment::run(args);
+    }
     let mut policy = Policy::load(&args.model)
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
     let env = model_env(&policy, &args.overrides)?;

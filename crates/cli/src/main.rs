@@ -9,6 +9,7 @@ mod demo;
 mod deploy_cmd;
 mod env_cmd;
 mod eval_cmd;
+mod eval_deployment;
 mod export_cmd;
 mod inspect;
 mod plot_cmd;

@@ -221,8 +221,13 @@ fn print_summary(summary: &TrainSummary) -> Result<()> {
         println!("peak memory {mib:.0} MiB");
     }
     if let Some(best) = &summary.best {
+        let over = if best.confirmed {
+            format!(" over {} validation episodes", best.episodes)
+        } else {
+            String::new()
+        };
         println!(
-            "best evaluation: success {:.0}%, mean return {:.2}, mean length {:.1} (model in {})",
+            "best evaluation: success {:.1}%{over}, mean return {:.2}, mean length {:.1} (model in {})",
             best.success_rate * 100.0,
             best.mean_return,
             best.mean_length,

@@ -149,4 +149,18 @@ pub trait RobotLink: Send {
     /// timeout; `MoveJ` blocks until the motion ends, bounded by its own timeout).
     /// A non-zero error code is a [`crate::DeployError::Controller`].
     fn send(&mut self, command: &RobotCommand) -> Result<()>;
+
+    /// The link's clock: real time for a controller; a simulated controller's own time, which
+    /// moves only as it is waited on (the deployment-matched evaluation).
+    fn now(&self) -> Instant {
+        Instant::now()
+    }
+
+    /// Waits until `t` on the link's clock.
+    fn sleep_until(&mut self, t: Instant) {
+        let now = Instant::now();
+        if t > now {
+            std::thread::sleep(t - now);
+        }
+    }
 }

@@ -93,7 +93,11 @@ fn grasps_on_the_twin(model: &str) {
     )
     .unwrap();
     assert_eq!(deployment.motion_mismatch(), None);
-    assert_eq!(deployment.servo_ticks(), 8, "1/30 s ÷ 0.5 over 8 ms");
+    assert_eq!(
+        deployment.servo_ticks(),
+        9,
+        "1/30 s ÷ 0.5 in periods of at most 8 ms"
+    );
     let mut host = TwinHost::detect(&twin.rpc_addr().to_string(), 2_000_000_000)
         .unwrap()
         .expect("the twin says it is one");

@@ -54,23 +54,8 @@ impl ServoClock {
         self.start + self.period * (self.taken + self.slipped) as u32
     }
 
-    /// Sleeps until the next tick is due (at once if it is).
-    pub fn wait(&self) {
-        let due = self.next_due();
-        let now = Instant::now();
-        if due > now {
-            std::thread::sleep(due - now);
-        }
-    }
-
-    /// Waits for the next tick, then takes every tick due by now, no more than one send may
-    /// cover and never past tick `until` (exclusive); returns how many.
-    pub fn take(&mut self, until: u64) -> u32 {
-        self.wait();
-        self.take_due(Instant::now(), until)
-    }
-
-    /// [`Self::take`] at `now`, without waiting (at least one tick).
+    /// Takes every tick due at `now` (at least one), no more than one send may cover and never
+    /// past tick `until` (exclusive); returns how many. Call it once the next tick is due.
     pub fn take_due(&mut self, now: Instant, until: u64) -> u32 {
         let elapsed = now.saturating_duration_since(self.start);
         let due = (elapsed.as_nanos() / self.period.as_nanos().max(1)) as u64 + 1;

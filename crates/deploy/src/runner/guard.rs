@@ -94,6 +94,16 @@ impl GuardedLink {
         self.tripped = Some(fault.clone());
     }
 
+    /// The link's clock ([`RobotLink::now`]).
+    pub fn now(&self) -> Instant {
+        self.link.now()
+    }
+
+    /// Waits until `t` on the link's clock ([`RobotLink::sleep_until`]).
+    pub fn sleep_until(&mut self, t: Instant) {
+        self.link.sleep_until(t)
+    }
+
     /// How long stopping took, from the fault's detection to both calls answered.
     pub fn stopped_in(&self) -> Option<std::time::Duration> {
         self.stopped_in

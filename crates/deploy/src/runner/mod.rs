@@ -36,7 +36,7 @@ use fairgrasp_env::tasks::grasp::Streak;
 use fairgrasp_rl::policies::Policy;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// How the loop runs.
 #[derive(Clone, Debug)]
@@ -56,6 +56,11 @@ pub struct DeployOptions {
     /// policy never learnt what to do after success: holding on, kinematic-drive policies
     /// drifted with the lifted cube to the workspace box's edge (2 of 3 twin runs stopped).
     pub end_at_success: bool,
+    /// After the success rule held, keep the arm at its last target with the gripper closed
+    /// for this many control steps before the episode ends: the loop judged success on its
+    /// estimated state, a judge of the true state (the twin's, an operator's) on its own clock
+    /// may count one step later.
+    pub hold_after_success: u32,
 }
 
 impl Default for DeployOptions {
@@ -68,6 +73,7 @@ impl Default for DeployOptions {
             gripper_index: 1,
             pose_timeout: Duration::from_secs(2),
             end_at_success: true,
+            hold_after_success: 5,
         }
     }
 }
@@ -257,22 +263,23 @@ impl Deployment {
         if !matches!(fault, Fault::CallFailed { .. }) {
             return fault;
         }
-        let until = Instant::now() + Duration::from_millis(50);
-        while Instant::now() < until {
+        let until = self.link.now() + Duration::from_millis(50);
+        while self.link.now() < until {
             match self.link.state() {
                 Ok(s) => {
                     if let Err(
                         f @ (Fault::EmergencyStop
                         | Fault::SafetyStop(_)
                         | Fault::ControllerFault { .. }),
-                    ) = self.watchdog.check(&s, Instant::now())
+                    ) = self.watchdog.check(&s, self.link.now())
                     {
                         return f;
                     }
                 }
                 Err(f) => return f,
             }
-            std::thread::sleep(Duration::from_millis(2));
+            let later = self.link.now() + Duration::from_millis(2);
+            self.link.sleep_until(later);
         }
         fault
     }
@@ -301,7 +308,7 @@ impl Deployment {
             return Err(Fault::Interrupted);
         }
         let s = self.link.state()?;
-        self.watchdog.check(&s, Instant::now())?;
+        self.watchdog.check(&s, self.link.now())?;
         Ok(s)
     }
 
@@ -340,6 +347,35 @@ impl Deployment {
         })
     }
 
+    /// Streams set points towards `target` on the servo schedule until tick `until`: each send
+    /// waits for its tick, checks the state (after the step's first, read just before), and
+    /// carries the filter's set point for every tick due by then.
+    fn stream(
+        &mut self,
+        clock: &mut ServoClock,
+        target: &[f64; 6],
+        until: u64,
+    ) -> std::result::Result<(), Fault> {
+        let mut first = true;
+        while clock.taken() < until {
+            self.link.sleep_until(clock.next_due());
+            if !first {
+                self.checked_state()?;
+            }
+            first = false;
+            let n = clock.take_due(self.link.now(), until);
+            let mut set_point = self.filter.next(target)?;
+            for _ in 1..n {
+                set_point = self.filter.next(target)?;
+            }
+            self.link.send(&RobotCommand::ServoJ {
+                joints_deg: set_point,
+                cmd_t: (self.tick.as_secs_f64() * n as f64).min(MAX_CMD_T),
+            })?;
+        }
+        Ok(())
+    }
+
     /// One episode from home: returns when its steps are done, or the fault.
     fn episode(
         &mut self,
@@ -364,7 +400,7 @@ impl Deployment {
             &start.state,
             &object,
             closing,
-            Instant::now(),
+            self.link.now(),
         );
         let mut command = self.io.hold(&state);
         let mut shown = vec![0.0; self.policy.act_dim()];
@@ -373,12 +409,12 @@ impl Deployment {
         let rule = self.io.task().clone();
         let mut streak = Streak::default();
         let mut acted = steps;
-        let mut clock = ServoClock::new(Instant::now(), self.tick);
+        let mut clock = ServoClock::new(self.link.now(), self.tick);
         for step in 0..steps {
             if step > 0 {
                 // The step begins when its first tick is due: the policy acts at its trained
                 // period however the replies went.
-                clock.wait();
+                self.link.sleep_until(clock.next_due());
                 let reading = self.checked_state()?;
                 if let Some(p) = pose
                     .latest()
@@ -392,12 +428,17 @@ impl Deployment {
                     &reading.state,
                     &object,
                     closing,
-                    Instant::now(),
+                    self.link.now(),
                 );
                 if self.options.end_at_success
                     && streak.update(rule.holds(&state)) >= rule.success_hold_steps
                 {
                     acted = step;
+                    let target = self.calibration.to_robot(&command.arm_target);
+                    for k in 0..self.options.hold_after_success as u64 {
+                        let until = (step as u64 + k + 1) * self.servo_ticks as u64;
+                        self.stream(&mut clock, &target, until)?;
+                    }
                     break;
                 }
             }
@@ -428,22 +469,7 @@ impl Deployment {
             }
             let target = self.calibration.to_robot(&command.arm_target);
             let until = (step as u64 + 1) * self.servo_ticks as u64;
-            let mut first = true;
-            while clock.taken() < until {
-                if !first {
-                    self.checked_state()?;
-                }
-                first = false;
-                let n = clock.take(until);
-                let mut set_point = self.filter.next(&target)?;
-                for _ in 1..n {
-                    set_point = self.filter.next(&target)?;
-                }
-                self.link.send(&RobotCommand::ServoJ {
-                    joints_deg: set_point,
-                    cmd_t: (self.tick.as_secs_f64() * n as f64).min(MAX_CMD_T),
-                })?;
-            }
+            self.stream(&mut clock, &target, until)?;
         }
         self.link.send(&RobotCommand::ServoMoveEnd)?;
         self.gripper(true)?;

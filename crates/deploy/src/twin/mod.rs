@@ -35,6 +35,7 @@ pub mod motion;
 pub mod pose_feed;
 pub mod service;
 mod sim_loop;
+pub mod simulated;
 pub mod world;
 
 #[cfg(test)]

@@ -609,12 +609,31 @@ impl<T: Task> Env for ArmEnv<T> {
                 .collect()
         };
         self.scene.set_gripper_open(episode.command.gripper_open)?;
+        // With `[readings]`, the readings may be this many substeps older than the step's end.
+        let substeps = self.scene.config().physics.substeps;
+        let age = match &self.config.readings {
+            r if r.enabled && r.state_age_ms[1] > 0.0 => {
+                let ms = uniform(&mut self.rng, r.state_age_ms);
+                let steps = (ms as f64 / 1000.0 / self.scene.dt() as f64).round() as u32;
+                steps.min(substeps - 1)
+            }
+            _ => 0,
+        };
+        let mut early = None;
+        let mut read_early = |scene: &Scene, done: u32| {
+            if age > 0 && done == substeps - age {
+                early = Some(ArmState::from_scene(scene));
+            }
+        };
         let stepped = match episode.ramp.as_mut() {
-            None => self
-                .scene
-                .set_arm_targets(&physical)
-                .and_then(|()| self.scene.step_control()),
-            Some(ramp) => servo::step_servoed(&mut self.scene, ramp, &physical),
+            None => self.scene.set_arm_targets(&physical).and_then(|()| {
+                for done in 1..=substeps {
+                    self.scene.step_physics()?;
+                    read_early(&self.scene, done);
+                }
+                self.scene.check_finite()
+            }),
+            Some(ramp) => servo::step_servoed(&mut self.scene, ramp, &physical, read_early),
         };
         match stepped {
             Ok(()) => {}
@@ -634,7 +653,11 @@ impl<T: Task> Env for ArmEnv<T> {
         let mut estimator = episode.estimator.take();
         let observed = match (estimator.as_mut(), before) {
             (Some(e), Some(before)) => {
-                let view = reported.as_ref().unwrap_or(&state);
+                let early = early.map(|s| {
+                    let seen = self::reported(&self.mapper, &s, &episode.joint_offset);
+                    seen.unwrap_or(s)
+                });
+                let view = (early.as_ref()).or(reported.as_ref()).unwrap_or(&state);
                 let dt = self.scene.control_period() as f64;
                 Some(self.estimate(e, view, &before, closing, dt))
             }

@@ -11,7 +11,7 @@
 //! state.
 
 use crate::arm::state::{ArmState, ObjectReading};
-use crate::config::check_non_negative;
+use crate::config::{check_non_negative, check_range};
 use crate::error::Result;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::{Isometry3, Vector3};
@@ -28,6 +28,11 @@ pub struct ReadingsConfig {
     /// The object pose feed's rate (Hz). Each control step sees the pose as it was a uniformly
     /// drawn age of up to one feed period earlier; 0 shows the current pose.
     pub object_feed_hz: f32,
+    /// How old the controller's readings are when the policy acts, drawn each control step
+    /// (ms, uniform, rounded to physics substeps): the state stream's period, the reply
+    /// latency before a set point acts, and the drives' own delay, all in the policy's time.
+    /// `[0, 0]`: read at the step's end.
+    pub state_age_ms: [f32; 2],
 }
 
 impl Default for ReadingsConfig {
@@ -36,6 +41,7 @@ impl Default for ReadingsConfig {
         Self {
             enabled: false,
             object_feed_hz: 30.0,
+            state_age_ms: [0.0, 0.0],
         }
     }
 }
@@ -43,6 +49,7 @@ impl Default for ReadingsConfig {
 impl ReadingsConfig {
     pub fn validate(&self) -> Result<()> {
         check_non_negative("readings.object_feed_hz", self.object_feed_hz)?;
+        check_range("readings.state_age_ms", self.state_age_ms, 0.0, 1000.0)?;
         Ok(())
     }
 

@@ -65,11 +65,13 @@ pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
 }
 
 /// One control step through the servo ramp: a set point every servo period, each held by the
-/// drives for that period's share of the physics substeps.
+/// drives for that period's share of the physics substeps. `after_substep` sees the scene after
+/// each physics substep with the count done.
 pub(crate) fn step_servoed(
     scene: &mut Scene,
     ramp: &mut JointRamp,
     target: &[f32],
+    mut after_substep: impl FnMut(&Scene, u32),
 ) -> std::result::Result<(), SimError> {
     let substeps = scene.config().physics.substeps;
     let ticks = servo_ticks(scene.control_period(), ramp.caps().2 as f32 * 1000.0)
@@ -86,6 +88,7 @@ pub(crate) fn step_servoed(
         while done < until {
             scene.step_physics()?;
             done += 1;
+            after_substep(scene, done);
         }
     }
     scene.check_finite()

@@ -1,0 +1,150 @@
+//! `fairgrasp eval --deployment`: the deployment-matched evaluation. The model runs through the
+//! deployment's own loop (state estimation, safety filter, servo schedule, success rule) against
+//! the twin's controller model and world in this process, on a simulated clock with drawn reply
+//! latencies: what `fairgrasp deploy` on `fairgrasp twin` measures, without sockets or real
+//! time, so it is fast and independent of the host's load.
+
+use crate::eval_cmd::EvalArgs;
+use anyhow::{Context, Result};
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo};
+use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
+use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::train::wilson_lower_bound;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+#[derive(clap::Args)]
+pub struct DeploymentEvalArgs {
+    /// Run the model through the deployment loop against the simulated controller (see
+    /// docs/deployment.md) instead of the training env.
+    #[arg(long)]
+    pub deployment: bool,
+    /// With --deployment: the speed scale, as `fairgrasp deploy --speed-scale`.
+    #[arg(long, default_value_t = 0.25, requires = "deployment")]
+    pub speed_scale: f64,
+    /// With --deployment: each call's reply latency (ms), drawn from latency ± jitter.
+    #[arg(long, default_value_t = 10.0, requires = "deployment")]
+    pub latency_ms: f64,
+    #[arg(long, default_value_t = 5.0, requires = "deployment")]
+    pub latency_jitter_ms: f64,
+    /// With --deployment: encoder noise on the streamed joints (deg).
+    #[arg(long, default_value_t = 0.05, requires = "deployment")]
+    pub joint_noise_deg: f64,
+}
+
+pub fn run(args: &EvalArgs) -> Result<()> {
+    let d = &args.deployment;
+    anyhow::ensure!(
+        args.overrides.is_empty() && args.trace.is_none(),
+        "--set and --trace do not apply to --deployment (the model's own settings are deployed)"
+    );
+    let policy = Policy::load(&args.model)
+        .with_context(|| format!("cannot load model {}", args.model.display()))?;
+    let io = ModelIo::for_policy(&policy)?;
+    let calibration = Calibration::identity(&io.limits_rad);
+    let settings = SimulatedSettings {
+        latency_ms: [
+            (d.latency_ms - d.latency_jitter_ms).max(0.0),
+            d.latency_ms + d.latency_jitter_ms,
+        ],
+        joint_noise_deg: d.joint_noise_deg,
+        seed: args.seed,
+        ..SimulatedSettings::default()
+    };
+    let table = fairgrasp_rl::model::env_table(policy.env_config())?;
+    let link = SimulatedController::new(policy.env_id(), &table, settings)?;
+    let options = DeployOptions {
+        live: true,
+        episodes: args.episodes,
+        safety: SafetyConfig {
+            speed_scale: d.speed_scale,
+            ..SafetyConfig::default()
+        },
+        ..DeployOptions::default()
+    };
+    let mut deployment = Deployment::new(
+        Box::new(link.clone()),
+        policy,
+        calibration,
+        options,
+        JsonLog::create(None)?,
+        Arc::new(AtomicBool::new(false)),
+    )?;
+    for why in [
+        deployment.motion_mismatch(),
+        deployment.observation_mismatch(),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        eprintln!("warning: {why}");
+    }
+    let started = std::time::Instant::now();
+    let report = deployment.run(&mut link.host(), &mut link.pose_source())?;
+    let seconds = started.elapsed().as_secs_f64();
+    let played = report.episodes.len() as u32;
+    let successes = (report.episodes.iter())
+        .filter(|e| e.success == Some(true))
+        .count() as u32;
+    let rate = successes as f64 / played.max(1) as f64;
+    let bound = wilson_lower_bound(successes, played);
+    let fault = report.fault.as_ref().map(|f| f.to_string());
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "model": args.model.display().to_string(),
+                "deployment": true,
+                "speed_scale": d.speed_scale,
+                "latency_ms": [settings_range(d).0, settings_range(d).1],
+                "joint_noise_deg": d.joint_noise_deg,
+                "episodes": played,
+                "seed": args.seed,
+                "successes": successes,
+                "success_rate": rate,
+                "wilson_lower_bound": bound,
+                "fault": fault,
+                "simulated_seconds": link.elapsed(),
+                "seconds": seconds,
+            })
+        );
+    } else {
+        println!(
+            "{} through the deployment loop on the simulated controller (speed scale {}, \
+             latency {:.0}-{:.0} ms, encoder noise {} deg), {played} episodes from seed {}:",
+            args.model.display(),
+            d.speed_scale,
+            settings_range(d).0,
+            settings_range(d).1,
+            d.joint_noise_deg,
+            args.seed
+        );
+        println!(
+            "  success rate {:.1}% ({successes} of {played}), 95% lower bound {:.1}%",
+            rate * 100.0,
+            bound * 100.0
+        );
+        println!(
+            "  {:.0} s of controller time in {seconds:.1} s",
+            link.elapsed()
+        );
+        if let Some(f) = &fault {
+            println!("  stopped by a fault: {f}");
+        }
+    }
+    anyhow::ensure!(
+        fault.is_none() || played == args.episodes,
+        "the run stopped after {played} of {} episodes",
+        args.episodes
+    );
+    Ok(())
+}
+
+fn settings_range(d: &DeploymentEvalArgs) -> (f64, f64) {
+    (
+        (d.latency_ms - d.latency_jitter_ms).max(0.0),
+        d.latency_ms + d.latency_jitter_ms,
+    )
+}

@@ -1,0 +1,96 @@
+//! The deployment-matched evaluation: the deployment loop — estimator, safety filter, servo
+//! schedule, success rule — against the twin's controller model and world in this process, on
+//! a simulated clock with drawn reply latencies (`fairgrasp eval --deployment`).
+
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::robot::RobotLink;
+use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo};
+use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
+use fairgrasp_rl::policies::Policy;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// `fairgrasp train --config configs/ppo_deploy.toml` (seed 42).
+fn model_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/deploy_ppo")
+}
+
+fn run(speed_scale: f64, episodes: u32, seed: u64) -> (u32, u32, f64) {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
+    let settings = SimulatedSettings {
+        seed,
+        ..SimulatedSettings::default()
+    };
+    let link = SimulatedController::new(policy.env_id(), &table, settings).unwrap();
+    let options = DeployOptions {
+        live: true,
+        episodes,
+        safety: SafetyConfig {
+            speed_scale,
+            ..SafetyConfig::default()
+        },
+        ..DeployOptions::default()
+    };
+    let mut deployment = Deployment::new(
+        Box::new(link.clone()),
+        policy,
+        Calibration::identity(&io.limits_rad),
+        options,
+        JsonLog::create(None).unwrap(),
+        Arc::new(AtomicBool::new(false)),
+    )
+    .unwrap();
+    let report = deployment
+        .run(&mut link.host(), &mut link.pose_source())
+        .unwrap();
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    let grasped = (report.episodes.iter())
+        .filter(|e| e.success == Some(true))
+        .count() as u32;
+    (grasped, report.episodes.len() as u32, link.elapsed())
+}
+
+#[test]
+fn the_deployment_loop_grasps_on_the_simulated_controller_at_both_speed_scales() {
+    // Held-out placements; one miss of five allowed at each scale.
+    for scale in [1.0, 0.25] {
+        let (grasped, played, seconds) = run(scale, 5, 2_000_000_000);
+        assert_eq!(played, 5);
+        assert!(grasped >= 4, "{grasped} of 5 at speed scale {scale}");
+        // The controller's own time: each episode a MoveJ home and at least ~30 control steps
+        // of 1/30 s ÷ the scale.
+        assert!(
+            seconds > 5.0 / scale,
+            "{seconds} s simulated at scale {scale}"
+        );
+    }
+}
+
+#[test]
+fn the_simulated_clock_moves_only_when_waited_on() {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
+    let mut link =
+        SimulatedController::new(policy.env_id(), &table, SimulatedSettings::default()).unwrap();
+    let t0 = link.now();
+    let s0 = link.latest_state().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    assert_eq!(link.now(), t0, "real time does not move it");
+    link.sleep_until(t0 + std::time::Duration::from_millis(100));
+    let s1 = link.latest_state().unwrap();
+    // A frame every 8 ms: about 12 more in 100 ms, the newest no older than a period and
+    // the physics step (4.2 ms) it waited for.
+    assert!((11..=13).contains(&(s1.sequence - s0.sequence)), "{s1:?}");
+    let age = link.now() - s1.received_at;
+    assert!(age <= std::time::Duration::from_millis(13), "{age:?}");
+    // A call takes its reply latency (5-15 ms by default).
+    let before = link.now();
+    link.send(&fairgrasp_deploy::RobotCommand::ResetAllError)
+        .unwrap();
+    let took = link.now() - before;
+    assert!((5..=15).contains(&took.as_millis()), "{took:?}");
+}

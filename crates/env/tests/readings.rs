@@ -1,0 +1,74 @@
+//! `[readings]`: the policy's state built from synthesized controller readings, as the
+//! deployment builds it; the true state stays the judge.
+
+use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::tasks::grasp::GraspConfig;
+use fairgrasp_env::{Env, GraspEnv};
+
+fn env_with(mutate: impl FnOnce(&mut GraspConfig)) -> GraspEnv {
+    let mut config = GraspConfig::default();
+    config.readings.enabled = true;
+    mutate(&mut config);
+    GraspEnv::new(config).expect("env builds")
+}
+
+#[test]
+fn the_policy_sees_the_controller_s_view_and_a_scripted_grasp_still_succeeds() {
+    let mut env = env_with(|c| c.readings.state_age_ms = [0.0, 15.0]);
+    let (mut successes, mut held_seen) = (0, 0);
+    for seed in 0..10 {
+        env.reset(Some(seed)).unwrap();
+        let mut policy = ScriptedGraspPolicy::new(&env);
+        loop {
+            let step = env.step(&policy.act(&env)).unwrap();
+            let seen = env.observed_state().unwrap();
+            let truth = env.state().unwrap();
+            // The gripper in the controller's whole percent; the pads inferred, both at once.
+            let percent = seen.gripper_opening / seen.gripper_max_opening * 100.0;
+            assert!((percent - percent.round()).abs() < 1e-3, "{percent}");
+            let pads = seen.objects[0].pad_contacts;
+            assert_eq!(pads[0], pads[1]);
+            held_seen += (pads[0] && truth.grasped(0)) as u32;
+            if step.terminated || step.truncated {
+                successes += step.info.success as u32;
+                break;
+            }
+        }
+    }
+    assert!(successes >= 9, "{successes} of 10");
+    assert!(
+        held_seen > 0,
+        "the estimator never saw the grasp the simulator had"
+    );
+}
+
+#[test]
+fn readings_older_than_the_step_s_end_lag_the_true_joints() {
+    // Joint 0 turning at the action's full 0.05 rad per step: about 1.5 rad/s.
+    let lag = |age_ms: f32| {
+        let mut env = env_with(|c| {
+            c.control.action_mode = ActionMode::Joint;
+            c.readings.state_age_ms = [age_ms, age_ms];
+        });
+        env.reset(Some(1)).unwrap();
+        let mut action = vec![0.0; 7];
+        action[0] = 0.05;
+        action[6] = 1.0;
+        for _ in 0..10 {
+            env.step(&action).unwrap();
+        }
+        let (seen, truth) = (env.observed_state().unwrap(), env.state().unwrap());
+        (truth.q[0] - seen.q[0], truth.qd[0])
+    };
+    let (now, _) = lag(0.0);
+    assert!(now.abs() < 1e-5, "{now}");
+    // 12.5 ms: three physics substeps at 240 Hz.
+    let (behind, speed) = lag(12.5);
+    let expected = speed * 0.0125;
+    assert!(expected > 0.005, "the joint barely moves: {speed} rad/s");
+    assert!(
+        (behind / expected - 1.0).abs() < 0.3,
+        "{behind} rad behind, {expected} expected"
+    );
+}
