@@ -185,13 +185,7 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         log,
         interrupt,
     )?;
-    for why in [
-        deployment.motion_mismatch(),
-        deployment.observation_mismatch(),
-    ]
-    .into_iter()
-    .flatten()
-    {
+    for why in deployment.mismatches() {
         eprintln!("warning: {why}");
     }
     println!(

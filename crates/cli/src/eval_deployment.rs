@@ -44,53 +44,58 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
     let io = ModelIo::for_policy(&policy)?;
     let calibration = Calibration::identity(&io.limits_rad);
+    let (low, high) = settings_range(d);
     let settings = SimulatedSettings {
-        latency_ms: [
-            (d.latency_ms - d.latency_jitter_ms).max(0.0),
-            d.latency_ms + d.latency_jitter_ms,
-        ],
+        latency_ms: [low, high],
         joint_noise_deg: d.joint_noise_deg,
         seed: args.seed,
         ..SimulatedSettings::default()
     };
     let table = fairgrasp_rl::model::env_table(policy.env_config())?;
     let link = SimulatedController::new(policy.env_id(), &table, settings)?;
-    let options = DeployOptions {
-        live: true,
-        episodes: args.episodes,
-        safety: SafetyConfig {
-            speed_scale: d.speed_scale,
-            ..SafetyConfig::default()
-        },
-        ..DeployOptions::default()
-    };
-    let mut deployment = Deployment::new(
-        Box::new(link.clone()),
-        policy,
-        calibration,
-        options,
-        JsonLog::create(None)?,
-        Arc::new(AtomicBool::new(false)),
-    )?;
-    for why in [
-        deployment.motion_mismatch(),
-        deployment.observation_mismatch(),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        eprintln!("warning: {why}");
-    }
+    // A fault stops the arm and ends a deployment run, as it must on a robot; here it counts
+    // as a failed episode and the evaluation goes on from the next placement with a fresh loop.
     let started = std::time::Instant::now();
-    let report = deployment.run(&mut link.host(), &mut link.pose_source())?;
+    let (mut played, mut successes) = (0u32, 0u32);
+    let mut faults: Vec<String> = Vec::new();
+    while played < args.episodes {
+        let options = DeployOptions {
+            live: true,
+            episodes: args.episodes - played,
+            safety: SafetyConfig {
+                speed_scale: d.speed_scale,
+                ..SafetyConfig::default()
+            },
+            ..DeployOptions::default()
+        };
+        let mut deployment = Deployment::new(
+            Box::new(link.clone()),
+            Policy::load(&args.model)?,
+            calibration.clone(),
+            options,
+            JsonLog::create(None)?,
+            Arc::new(AtomicBool::new(false)),
+        )?;
+        if played == 0 {
+            for why in deployment.mismatches() {
+                eprintln!("warning: {why}");
+            }
+        }
+        let mut host = link.host_from(args.seed + played as u64);
+        let report = deployment.run(&mut host, &mut link.pose_source())?;
+        played += report.episodes.len() as u32;
+        successes += (report.episodes.iter())
+            .filter(|e| e.success == Some(true))
+            .count() as u32;
+        if let Some(fault) = report.fault {
+            println!("episode {}: stopped by a fault: {fault}", played + 1);
+            faults.push(fault.to_string());
+            played += 1;
+        }
+    }
     let seconds = started.elapsed().as_secs_f64();
-    let played = report.episodes.len() as u32;
-    let successes = (report.episodes.iter())
-        .filter(|e| e.success == Some(true))
-        .count() as u32;
     let rate = successes as f64 / played.max(1) as f64;
     let bound = wilson_lower_bound(successes, played);
-    let fault = report.fault.as_ref().map(|f| f.to_string());
     if args.json {
         println!(
             "{}",
@@ -98,14 +103,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                 "model": args.model.display().to_string(),
                 "deployment": true,
                 "speed_scale": d.speed_scale,
-                "latency_ms": [settings_range(d).0, settings_range(d).1],
+                "latency_ms": [low, high],
                 "joint_noise_deg": d.joint_noise_deg,
                 "episodes": played,
                 "seed": args.seed,
                 "successes": successes,
                 "success_rate": rate,
                 "wilson_lower_bound": bound,
-                "fault": fault,
+                "faults": faults,
                 "simulated_seconds": link.elapsed(),
                 "seconds": seconds,
             })
@@ -113,11 +118,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     } else {
         println!(
             "{} through the deployment loop on the simulated controller (speed scale {}, \
-             latency {:.0}-{:.0} ms, encoder noise {} deg), {played} episodes from seed {}:",
+             latency {low:.0}-{high:.0} ms, encoder noise {} deg), {played} episodes from seed {}:",
             args.model.display(),
             d.speed_scale,
-            settings_range(d).0,
-            settings_range(d).1,
             d.joint_noise_deg,
             args.seed
         );
@@ -130,15 +133,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             "  {:.0} s of controller time in {seconds:.1} s",
             link.elapsed()
         );
-        if let Some(f) = &fault {
-            println!("  stopped by a fault: {f}");
+        if !faults.is_empty() {
+            println!(
+                "  {} episode(s) stopped by a fault, counted as failed: {}",
+                faults.len(),
+                faults.join("; ")
+            );
         }
     }
-    anyhow::ensure!(
-        fault.is_none() || played == args.episodes,
-        "the run stopped after {played} of {} episodes",
-        args.episodes
-    );
     Ok(())
 }
 

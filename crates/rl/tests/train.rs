@@ -27,6 +27,17 @@ fn adam_steps(checkpoint: &Path) -> f64 {
     state["adam.step"].to_vec1::<f64>().unwrap()[0]
 }
 
+/// Every scalar of a run's TensorBoard event file.
+fn run_scalars(run: &Path) -> Vec<fairgrasp_rl::logger::ScalarEvent> {
+    let tb = std::fs::read_dir(run.join("tb"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    read_scalars(&tb).unwrap()
+}
+
 /// The `time/total_timesteps` column of progress.csv.
 fn logged_steps(run: &Path) -> Vec<f64> {
     let text = std::fs::read_to_string(run.join("progress.csv")).unwrap();
@@ -69,13 +80,7 @@ fn a_short_run_writes_config_logs_best_model_and_checkpoints() {
     let saved = std::fs::read_to_string(dir.path().join("config.toml")).unwrap();
     assert_eq!(TrainConfig::from_toml_str(&saved, &[]).unwrap(), config);
 
-    let tb = std::fs::read_dir(dir.path().join("tb"))
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
-    let scalars = read_scalars(&tb).unwrap();
+    let scalars = run_scalars(dir.path());
     for tag in [
         "rollout/ep_rew_mean",
         "rollout/success_rate",
@@ -399,13 +404,7 @@ fn a_threshold_stop_waits_for_its_confirmation_on_validation_seeds() {
         config.eval.confirm_episodes = 3;
         config.eval.confirm_lower_bound = bound;
         let summary = train(&config, dir.path(), |_| {}).unwrap();
-        let tb = std::fs::read_dir(dir.path().join("tb"))
-            .unwrap()
-            .next()
-            .unwrap()
-            .unwrap()
-            .path();
-        let scalars = read_scalars(&tb).unwrap();
+        let scalars = run_scalars(dir.path());
         let confirmations = scalars
             .iter()
             .filter(|s| s.tag == "eval/confirmed_lower_bound")

@@ -197,6 +197,15 @@ impl Deployment {
         self.io.observation_mismatch()
     }
 
+    /// Every way the policy will meet the arm otherwise than it learnt: for the operator's
+    /// warnings before anything moves.
+    pub fn mismatches(&self) -> Vec<String> {
+        [self.motion_mismatch(), self.observation_mismatch()]
+            .into_iter()
+            .flatten()
+            .collect()
+    }
+
     /// The home pose in robot degrees.
     pub fn home_deg(&self) -> [f64; 6] {
         self.calibration.to_robot(&self.io.nominal.q)

@@ -260,6 +260,11 @@ impl SimulatedController {
     /// true state.
     pub fn host(&self) -> SimulatedHost {
         let seed = self.inner().settings.seed;
+        self.host_from(seed)
+    }
+
+    /// [`Self::host`] with episode `i` placed from `seed + i`.
+    pub fn host_from(&self, seed: u64) -> SimulatedHost {
         SimulatedHost {
             controller: self.clone(),
             seed,
