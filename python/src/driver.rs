@@ -16,7 +16,7 @@
 
 use crate::errors::{ModelError, env_error, poisoned, rl_error};
 use fairgrasp_deploy::DeployError;
-use fairgrasp_deploy::runner::ModelIo;
+use fairgrasp_deploy::runner::{DeployOptions, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_env::arm::servo::servo_ticks;
 use fairgrasp_env::arm::{ArmState, Command, ControllerReading, JointRamp, StateEstimator};
@@ -275,6 +275,20 @@ impl Driver {
         })
     }
 
+    /// One more control step towards the present joint targets without acting: what the
+    /// deployment streams for `hold_after_success` steps once the success rule has held.
+    fn hold(&mut self) -> PyResult<Vec<Vec<f64>>> {
+        let episode = self.episode.as_ref().ok_or_else(|| {
+            PyRuntimeError::new_err("call begin() to start an episode before hold()")
+        })?;
+        let target: Vec<f64> = (episode.command.arm_target.iter())
+            .map(|&v| v as f64)
+            .collect();
+        Ok((0..self.ticks)
+            .map(|_| self.ramp.next(&target).expect("begin() started the ramp"))
+            .collect())
+    }
+
     /// Episode `seed`'s object as the model's own env lays it out (`fairgrasp eval` resets the
     /// same env with the same seed): its pose (base frame), size and material.
     fn placement(&mut self, seed: u64) -> fairgrasp_env::Result<Placement> {
@@ -420,6 +434,21 @@ impl PolicyDriver {
         )?;
         let output = self.with(py, move |d| d.step(reading))?;
         Self::output(py, output)
+    }
+
+    /// One more control step's set points (rad) towards the present joint targets, without
+    /// acting: after the success rule held, `fairgrasp deploy` streams `hold_after_success` of
+    /// these (arm held at its last target, gripper as commanded) before it ends the episode.
+    fn hold<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let set_points = self.with(py, |d| d.hold())?;
+        PyList::new(py, set_points)
+    }
+
+    /// Control steps the deployment holds the arm after the success rule held
+    /// (`DeployOptions::hold_after_success`'s default).
+    #[getter]
+    fn hold_after_success(&self) -> u32 {
+        DeployOptions::default().hold_after_success
     }
 
     /// Episode `seed`'s object as `fairgrasp eval` lays it out with this model's env: a dict of

@@ -57,6 +57,9 @@ def test_the_driver_runs_a_saved_model_as_the_deployment_does(trained_model):
             assert np.all(np.abs(v - velocity) <= acc_cap * driver.servo_period * (1 + 1e-6))
             previous, velocity = p, v
     assert driver.steps == 8
+    # Holding (after the success rule held, the deployment streams towards the last target).
+    assert np.array(driver.hold()).shape == (driver.servo_ticks, 6) and driver.steps == 8
+    assert driver.hold_after_success == 5
     estimate = driver.estimate()
     assert estimate is not None and estimate["pad_contacts"] == [False, False]
 

@@ -17,7 +17,10 @@ pad friction are fairgrasp's figures):
   40 N) on the left finger, the right one coupled by a joint equality (the URDF's mimic); open
   = the full stroke, closed = 0.
 - **Readings** the driver gets each control step, as a controller reports them: joints and
-  speeds in degrees, the gripper in whole percent of its stroke (round(opening / max × 100)),
+  speeds in degrees, the gripper in whole percent of its stroke (round(opening / max × 100),
+  the opening being the pads' distance q_left + q_right: MuJoCo's mimic coupling is a soft
+  joint equality that yields ~3 mm under the 40 N squeeze, where fairgrasp's 2 × q_left is
+  exact; `--opening left` reads it fairgrasp's way),
   and the cube's pose in the base frame as a perception feed gives it (the current pose; the
   deployment's 30 Hz feed can be up to one period old).
 - **Episodes** start as fairgrasp's do: the arm at the model's home pose with the gripper open,
@@ -29,21 +32,31 @@ pad friction are fairgrasp's figures):
   5 mm, the cube lifted more than 5 cm above its resting height and less than 8 cm from the TCP,
   for 10 consecutive control steps. The episode ends there, as a training episode does, or when
   the cube leaves the table, or at the model's step limit. When the driver's own success rule
-  (on its estimated state) ends the episode first, as the deployment loop would, the arm holds
-  its last set point and MuJoCo's rule gets the remaining hold steps to finish its streak.
+  (on its estimated state) ends the episode first, the deployment loop's ending follows: the arm
+  streamed towards its last target with the gripper as commanded for `hold_after_success` (5)
+  control steps (`PolicyDriver.hold`), during which MuJoCo's streak may complete, as the twin's
+  judge counts on its own clock; if it does not, the episode failed.
 
 **Contact settings, chosen once from physics, never tuned to a policy.** MuJoCo's contacts are
 soft; with its defaults (solref time constant 20 ms) a squeezed 100 g cube sinks into the pads
 and slides out. `mujoco_scene` makes them stiff and critically damped instead: solref time
 constant 2·dt (the fastest the 240 Hz integrator resolves stably), damping ratio 1, solimp
-0.99 (99 % of the constraint's stiffness from the first 1 mm of penetration), which is what
-fairgrasp's rapier contacts at 300 Hz contact frequency amount to at this time step. The
+0.99 (99 % of the constraint's stiffness from the first 1 mm of penetration): as stiff as
+MuJoCo allows at this time step, though still far softer than fairgrasp's rapier contacts at
+their 300 Hz contact frequency (see below). The
 friction coefficient of a pair is the one fairgrasp's engine uses for it: rapier combines the
 two surfaces' configured coefficients by their mean, MuJoCo by their maximum, so the pairs whose
 surfaces differ (pads against the cube and the table, the cube against the table) are declared
 explicitly with the mean (pads on the cube: (1.5 + 0.8) / 2 = 1.15, not 1.5). Pyramidal friction
 cones, condim 3 (sliding friction only, as rapier), Newton solver, implicit-fast integration:
 MuJoCo's defaults and mujoco_scene's, left as they are.
+
+Measured consequence (/work/notes/sim2sim.md): at 240 Hz the stiffest stable MuJoCo contact
+(time constant 2·dt = 8.3 ms) is far softer than rapier's 300 Hz contacts: pads closing on the
+100 g cube sink up to 1–1.5 cm into it for a control step, the gripper then reads below the
+cube's width, and the deployment's estimator (rightly, for a rigid cube) infers that nothing is
+held. `--timestep-divisor N` steps MuJoCo at dt / N with the time constants following (2 × its
+step): a diagnostic of that sensitivity, not the cell's setting.
 """
 
 from __future__ import annotations
@@ -75,6 +88,9 @@ DROP_GAP = 0.001
 # The grasp rule's smallest opening (m): fingers stopped by the object, not closed on nothing.
 MIN_OPENING = 0.005
 PADS = ("left_finger", "right_finger")
+# How the gripper's opening is read: "both" (q_left + q_right, the pads' distance) or "left"
+# (2 × q_left, fairgrasp's formula); set by --opening.
+OPENING = "both"
 
 
 def _mean_friction_pairs(root: ET.Element, solref: str, solimp: str) -> None:
@@ -107,11 +123,21 @@ def _mean_friction_pairs(root: ET.Element, solref: str, solimp: str) -> None:
                 )
 
 
-def cell_mjcf(config: dict, cube: dict, root: Path | None = None) -> str:
+def cell_mjcf(config: dict, cube: dict, root: Path | None = None, divisor: int = 1) -> str:
     """The cell's MJCF: `mujoco_scene.mjcf` for the model's settings, with episode `cube`'s
-    size, mass and friction (`PolicyDriver.placement`) and the pair frictions above."""
+    size, mass and friction (`PolicyDriver.placement`) and the pair frictions above. `divisor`
+    > 1 (a diagnostic, `--timestep-divisor`): MuJoCo steps at dt / divisor, and the contact
+    and equality time constants follow (2 × its step), so contacts are that much stiffer."""
     settings = SceneSettings.from_config(config)
     tree = ET.fromstring(mjcf(settings, config, root))
+    if divisor > 1:
+        dt = settings.dt / divisor
+        tree.find("option").set("timestep", f"{dt:.9g}")
+        solref = f"{2 * dt:.6g} 1"
+        tree.find("default/geom").set("solref", solref)
+        for e in tree.iter("joint"):
+            if e.get("joint1") is not None:
+                e.set("solref", solref)
     body = next(b for b in tree.iter("body") if b.get("name") == "cube")
     geom = body.find("geom")
     geom.set("name", "cube")
@@ -135,11 +161,11 @@ def quat_xyzw(wxyz: np.ndarray) -> list[float]:
 class MujocoCell:
     """The grasp cell in MuJoCo, read and driven as a controller and a pose feed would be."""
 
-    def __init__(self, config: dict, cube: dict, root: Path | None = None) -> None:
+    def __init__(self, config: dict, cube: dict, root: Path | None = None, divisor: int = 1) -> None:
         self.config = config
         self.settings = SceneSettings.from_config(config)
         self.cube_key = self._key(cube)
-        self.model = mujoco.MjModel.from_xml_string(cell_mjcf(config, cube, root))
+        self.model = mujoco.MjModel.from_xml_string(cell_mjcf(config, cube, root, divisor))
         self.data = mujoco.MjData(self.model)
         m = self.model
         self.arm_qpos = [m.jnt_qposadr[m.joint(n).id] for n in ARM_JOINTS]
@@ -157,7 +183,7 @@ class MujocoCell:
         ]
         self.half_extents = np.array(cube["half_extents"], dtype=float)
         self.table_top = self.settings.table_height
-        self.substeps = int(self.settings.substeps)
+        self.substeps = int(self.settings.substeps) * divisor
         mujoco.mj_forward(m, self.data)
         self.base_pos = self.data.xpos[self.base].copy()
         self.base_rot = self.data.xmat[self.base].reshape(3, 3).copy()
@@ -199,8 +225,15 @@ class MujocoCell:
 
     # ── what the controller and the pose feed report ─────────────────────────
     def opening(self) -> float:
-        """Distance between the pads (m), as fairgrasp measures it: twice the left finger's."""
-        return float(2 * self.data.qpos[self.finger_qpos[0]])
+        """Distance between the pads (m): the two fingers' positions added. (fairgrasp reads
+        twice the left finger's, which its hard mimic coupling makes the same; MuJoCo's
+        coupling is a soft joint equality that gives a few mm under the 40 N squeeze, and
+        2 × q_left then under-reads the stroke a gripper reports. `--opening left` reads it
+        that way, for comparison.)"""
+        q = self.data.qpos[self.finger_qpos]
+        if OPENING == "left":
+            return float(2 * q[0])
+        return float(q[0] + q[1])
 
     def cube_pose(self) -> tuple[np.ndarray, list[float]]:
         """The cube's centre and orientation (xyzw) in the arm base frame."""
@@ -318,15 +351,15 @@ def run_episode(driver, cell: MujocoCell, cube: dict, seed: int) -> Episode:
             set_points, gripper_open, held = driver.step(*cell.readings())
             e.grasp_estimate_mismatches += driver.estimate()["grasped"] != grasped
             if held:
-                # The deployment stops acting here; the arm holds, MuJoCo's rule finishes.
+                # The deployment stops acting here and holds the arm at its last target with the
+                # gripper as commanded for `hold_after_success` steps before it ends the
+                # episode; MuJoCo's rule may complete its streak meanwhile, as the twin's does.
                 e.driver_rule_held = True
                 e.ended_by = "driver's success rule"
-                for _ in range(hold):
-                    cell.drive([], gripper_open)
+                for _ in range(driver.hold_after_success):
+                    cell.drive(driver.hold(), gripper_open)
                     if judge(gripper_open):
                         e.success = True
-                        break
-                    if streak == 0:
                         break
                 break
         cell.drive(set_points, gripper_open)
@@ -380,7 +413,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-ours", action="store_true", help="skip fairgrasp's own evaluation")
     parser.add_argument("--fairgrasp-bin", help="run fairgrasp's evaluation with this binary (`eval --json`) instead of fairgrasp.evaluate")
     parser.add_argument("-v", "--verbose", action="store_true", help="a line per episode")
+    parser.add_argument(
+        "--opening", choices=["both", "left"], default="both",
+        help="read the gripper's opening as q_left + q_right (default: the pads' distance) or as 2 x q_left",
+    )
+    parser.add_argument(
+        "--timestep-divisor", type=int, default=1,
+        help="diagnostic: MuJoCo at dt / N with contact time constants 2 x its step (stiffer contacts); default 1, the cell's rate",
+    )
     args = parser.parse_args(argv)
+    global OPENING
+    OPENING = args.opening
+    if args.timestep_divisor < 1:
+        parser.error("--timestep-divisor must be at least 1")
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
 
@@ -395,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
         seed = args.seed + i
         cube = driver.placement(seed)
         if cell is None or not cell.fits(cube):
-            cell = MujocoCell(config, cube)
+            cell = MujocoCell(config, cube, divisor=args.timestep_divisor)
         e = run_episode(driver, cell, cube, seed)
         results.append(e)
         if args.verbose:
@@ -432,6 +477,8 @@ def main(argv: list[str] | None = None) -> int:
             "motion_mismatch": driver.motion_mismatch,
             "observation_mismatch": driver.observation_mismatch,
         },
+        "opening_read_as": args.opening,
+        "timestep_divisor": args.timestep_divisor,
         "cpu": cpu_model(),
     }
     line = f"MuJoCo {wins}/{n} ({100 * wins / n:.1f} %)"

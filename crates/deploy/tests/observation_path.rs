@@ -1,7 +1,7 @@
 //! One observation path: the observation a training env builds from synthesized controller
 //! readings (`[readings]`) equals, value for value, the one the deployment loop builds from the
-//! twin controller's CNDE frames and pose messages for the same simulated state, and so do the
-//! joint targets each action maps to. The deployment's side reads nothing but the frame, the
+//! twin controller's CNDE frames and pose messages for the same simulated state, and the joint
+//! targets each action maps to agree within the inverse kinematics' tolerance. The deployment's side reads nothing but the frame, the
 //! pose message and its own previous action, so the actor's input holds no value only the
 //! simulator knows (true contacts, exact openings, true velocities).
 
@@ -90,11 +90,16 @@ fn training_and_deployment_build_the_same_observation_from_the_same_state() {
             shown = next_shown;
             closing = !command.gripper_open;
             let stepped = env.step(&output).unwrap();
-            assert_eq!(
-                env.inner().command().unwrap().arm_target,
-                command.arm_target,
-                "episode {episode}, step {step}"
-            );
+            // Equal within the inverse kinematics' tolerance: training seeds it from the
+            // drives' targets at reset, the deployment from the measured joints.
+            let trained = &env.inner().command().unwrap().arm_target;
+            for (a, b) in trained.iter().zip(&command.arm_target) {
+                assert!(
+                    (a - b).abs() < 1e-4,
+                    "episode {episode}, step {step}: {trained:?} vs {:?}",
+                    command.arm_target
+                );
+            }
             obs = stepped.obs;
             if stepped.terminated || stepped.truncated {
                 break;

