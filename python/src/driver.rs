@@ -355,6 +355,20 @@ impl PolicyDriver {
         Ok(f(&driver))
     }
 
+    /// Reads the five reading arguments (joints, speeds, gripper, object position and
+    /// quaternion), runs `act` on them and returns its output as Python's tuple.
+    fn act_on<'py>(
+        &self,
+        py: Python<'py>,
+        [joints, speeds, gripper, position, quaternion]: [&Bound<'py, PyAny>; 5],
+        act: fn(&mut Driver, Reading) -> PyResult<Output>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let dof = self.read(Driver::dof)?;
+        let reading = Reading::new(dof, joints, speeds, gripper, position, quaternion)?;
+        let output = self.with(py, move |d| act(d, reading))?;
+        Self::output(py, output)
+    }
+
     fn output<'py>(py: Python<'py>, output: Output) -> PyResult<Bound<'py, PyTuple>> {
         let set_points = PyList::new(py, output.set_points)?;
         PyTuple::new(
@@ -397,17 +411,14 @@ impl PolicyDriver {
         object_pos: &Bound<'py, PyAny>,
         object_quat_xyzw: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let dof = self.read(Driver::dof)?;
-        let reading = Reading::new(
-            dof,
+        let readings = [
             joints_deg,
             joint_speeds_deg,
             gripper_percent,
             object_pos,
             object_quat_xyzw,
-        )?;
-        let output = self.with(py, move |d| d.begin(reading))?;
-        Self::output(py, output)
+        ];
+        self.act_on(py, readings, Driver::begin)
     }
 
     /// One control step from readings taken one control period after the previous ones:
@@ -423,17 +434,14 @@ impl PolicyDriver {
         object_pos: &Bound<'py, PyAny>,
         object_quat_xyzw: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let dof = self.read(Driver::dof)?;
-        let reading = Reading::new(
-            dof,
+        let readings = [
             joints_deg,
             joint_speeds_deg,
             gripper_percent,
             object_pos,
             object_quat_xyzw,
-        )?;
-        let output = self.with(py, move |d| d.step(reading))?;
-        Self::output(py, output)
+        ];
+        self.act_on(py, readings, Driver::step)
     }
 
     /// One more control step's set points (rad) towards the present joint targets, without
