@@ -67,6 +67,17 @@ def geom_attrs(geometry: ET.Element) -> dict[str, str] | None:
     return None  # meshes: the bundled descriptions use primitives only
 
 
+def addresses(m: mujoco.MjModel) -> tuple[list[int], list[int], list[int], float, int]:
+    """Where the cell's state lives in `qpos`/`qvel`: the arm joints' positions and velocities,
+    the two fingers' positions, the driven finger's stroke and the cube's free joint."""
+    arm_qpos = [m.jnt_qposadr[m.joint(n).id] for n in ARM_JOINTS]
+    arm_dof = [m.jnt_dofadr[m.joint(n).id] for n in ARM_JOINTS]
+    finger_qpos = [m.jnt_qposadr[m.joint(n).id] for n in (FINGER, MIMIC)]
+    finger_max = float(m.jnt_range[m.joint(FINGER).id][1])
+    cube_qpos = m.jnt_qposadr[m.joint("cube").id]
+    return arm_qpos, arm_dof, finger_qpos, finger_max, cube_qpos
+
+
 def mjcf(settings: SceneSettings, config: dict, root: Path | None = None) -> str:
     """The MJCF text of the scene."""
     root = root or repo_root()
@@ -182,11 +193,7 @@ class MujocoGraspScene:
         self.model = mujoco.MjModel.from_xml_string(mjcf(self.settings, self.config, root))
         self.data = mujoco.MjData(self.model)
         m = self.model
-        self.arm_qpos = [m.jnt_qposadr[m.joint(n).id] for n in ARM_JOINTS]
-        self.arm_dof = [m.jnt_dofadr[m.joint(n).id] for n in ARM_JOINTS]
-        self.finger_qpos = [m.jnt_qposadr[m.joint(n).id] for n in (FINGER, MIMIC)]
-        self.finger_max = float(m.jnt_range[m.joint(FINGER).id][1])
-        self.cube_qpos = m.jnt_qposadr[m.joint("cube").id]
+        self.arm_qpos, self.arm_dof, self.finger_qpos, self.finger_max, self.cube_qpos = addresses(m)
         self.tcp = m.site("tcp").id
         self.reset()
 

@@ -77,8 +77,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .mujoco_scene import FINGER, MIMIC, fmt, mjcf
-from .scene import ARM_JOINTS, SceneSettings
+from .mujoco_scene import addresses, fmt, mjcf
+from .scene import SceneSettings
 
 HELD_OUT_SEED = 2_000_000_000
 # fairgrasp's scene: two surfaces closer than this touch (crates/sim/src/scene/objects.rs).
@@ -168,12 +168,8 @@ class MujocoCell:
         self.model = mujoco.MjModel.from_xml_string(cell_mjcf(config, cube, root, divisor))
         self.data = mujoco.MjData(self.model)
         m = self.model
-        self.arm_qpos = [m.jnt_qposadr[m.joint(n).id] for n in ARM_JOINTS]
-        self.arm_dof = [m.jnt_dofadr[m.joint(n).id] for n in ARM_JOINTS]
-        self.finger_qpos = [m.jnt_qposadr[m.joint(n).id] for n in (FINGER, MIMIC)]
-        self.finger_max = float(m.jnt_range[m.joint(FINGER).id][1])
+        self.arm_qpos, self.arm_dof, self.finger_qpos, self.finger_max, self.cube_qpos = addresses(m)
         self.max_opening = 2 * self.finger_max
-        self.cube_qpos = m.jnt_qposadr[m.joint("cube").id]
         self.cube_dof = m.jnt_dofadr[m.joint("cube").id]
         self.cube_geom = m.geom("cube").id
         self.tcp = m.site("tcp").id
