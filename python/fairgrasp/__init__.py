@@ -17,7 +17,9 @@ know:
 - :func:`train` and :func:`evaluate`: the native trainer and evaluator;
 - :class:`PolicyDriver`: a saved model driven exactly as ``fairgrasp deploy`` drives it (state
   estimator, observation, action mapping, set-point ramp, success rule), fed by readings from
-  any simulator (``bench/sim2sim`` runs it on the cell in MuJoCo).
+  any simulator (``bench/sim2sim`` runs it on the cell in MuJoCo);
+- :class:`GripperRamp`: the gripper controller's set point after a ``MoveGripper``, the twin's
+  and training's model, for a simulator standing in for the arm.
 
 Settings are the env's TOML keys (``fairgrasp env config --env ID`` lists them): nested dicts
 for sections or dotted keys (``**{"control.action_mode": "cartesian"}``). Actions are in [-1, 1]
@@ -28,6 +30,7 @@ by default (``rescale_action=True``), as the native trainer learns them; pass
 from fairgrasp._native import (
     ActionError,
     ConfigError,
+    GripperRamp,
     ModelError,
     PolicyDriver,
     __version__,
@@ -56,6 +59,7 @@ __all__ = [
     "ConfigError",
     "FairgraspEnv",
     "FairgraspVectorEnv",
+    "GripperRamp",
     "ModelError",
     "Policy",
     "PolicyDriver",

@@ -93,6 +93,16 @@ class Policy:
 
 SetPoints = list[list[float]]
 
+class GripperRamp:
+    """The gripper controller's set point in % of the stroke (python/src/gripper.rs)."""
+
+    full_speed_percent_per_s: float
+    def __init__(self, opening_percent: float) -> None: ...
+    def command(self, fingers_percent: float, target_percent: float, speed_percent_per_s: float) -> None: ...
+    def advance(self, dt: float) -> float: ...
+    @property
+    def target(self) -> float: ...
+
 class PolicyDriver:
     """A saved FaArmGrasp-v0 model driven as `fairgrasp deploy` drives it (python/src/driver.rs)."""
 

@@ -19,9 +19,11 @@ use fairgrasp_deploy::DeployError;
 use fairgrasp_deploy::runner::{DeployOptions, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_env::arm::servo::servo_ticks;
-use fairgrasp_env::arm::{ArmState, Command, ControllerReading, JointRamp, StateEstimator};
+use fairgrasp_env::arm::{
+    ArmState, Command, ControllerReading, JointRamp, StateEstimator, SuccessJudge,
+};
+use fairgrasp_env::sim::pick::SuccessRule;
 use fairgrasp_env::sim::rapier3d::na::{Isometry3, Quaternion, Translation3, UnitQuaternion};
-use fairgrasp_env::tasks::grasp::Streak;
 use fairgrasp_env::{Env as _, GraspConfig, GraspEnv};
 use fairgrasp_rl::policies::Policy as NativePolicy;
 use numpy::{PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -137,7 +139,8 @@ struct Episode {
     shown: Vec<f32>,
     /// The gripper command before this step's action (what the estimator is told).
     closing: bool,
-    streak: Streak,
+    /// The task's success rule, as the deployment loop applies it.
+    success: Box<dyn SuccessJudge>,
     steps: u32,
     ended: bool,
     ik_failures: u32,
@@ -150,6 +153,8 @@ struct Driver {
     ticks: u32,
     env_id: String,
     table: toml::Table,
+    /// The figures of the model's success rule, for the caller's own judge.
+    rule: SuccessRule,
     /// Built at the first `placement` call: the model's own env, as `fairgrasp eval` builds it.
     placement_env: Option<GraspEnv>,
     episode: Option<Episode>,
@@ -160,6 +165,9 @@ impl Driver {
         let policy = NativePolicy::load(path).map_err(rl_error)?;
         let io = ModelIo::for_policy(&policy).map_err(deploy_error)?;
         let table = policy.env_settings(&[]).map_err(rl_error)?;
+        // ModelIo accepted the model, so its env is the grasp task's.
+        let config: GraspConfig =
+            fairgrasp_env::config::from_table(table.clone()).map_err(env_error)?;
         let servo = io.servo();
         let ticks = servo_ticks(io.control_period as f32, servo.period_ms);
         let limits: Vec<(f64, f64)> = (io.limits_rad.iter())
@@ -178,6 +186,7 @@ impl Driver {
             ramp,
             ticks,
             table,
+            rule: config.task.success_rule(),
             placement_env: None,
             episode: None,
         })
@@ -206,7 +215,7 @@ impl Driver {
             command,
             shown: vec![0.0; self.policy.act_dim()],
             closing: false,
-            streak: Streak::default(),
+            success: self.io.success_judge(),
             steps: 0,
             ended: false,
             ik_failures: 0,
@@ -217,7 +226,6 @@ impl Driver {
     /// A later step: the reading one control period after the previous one.
     fn step(&mut self, reading: Reading) -> PyResult<Output> {
         let dt = self.io.control_period;
-        let hold_steps = self.io.task().success_hold_steps;
         let episode = self.episode.as_mut().ok_or_else(|| {
             PyRuntimeError::new_err("call begin() to start an episode before step()")
         })?;
@@ -233,7 +241,7 @@ impl Driver {
             episode.closing,
             dt,
         );
-        if episode.streak.update(self.io.task().holds(&episode.state)) >= hold_steps {
+        if episode.success.update(&episode.state) {
             episode.ended = true;
             return Ok(Output {
                 set_points: Vec::new(),
@@ -522,17 +530,14 @@ impl PolicyDriver {
     /// Consecutive control steps the success rule must hold.
     #[getter]
     fn success_hold_steps(&self) -> PyResult<u32> {
-        self.read(|d| d.io.task().success_hold_steps)
+        self.read(|d| d.rule.hold_steps)
     }
 
     /// The success rule's lift (m above the object's resting height) and largest TCP–object
     /// distance (m).
     #[getter]
     fn success_rule(&self) -> PyResult<(f64, f64)> {
-        self.read(|d| {
-            let t = d.io.task();
-            (t.success_min_lift as f64, t.success_max_offset as f64)
-        })
+        self.read(|d| (d.rule.min_lift, d.rule.max_offset))
     }
 
     /// The gripper's largest opening (m): 100 % of the controller's reading.

@@ -2,7 +2,8 @@
 //! time ([`env::Env`]) and as a batch stepped by Rust threads with the GIL released
 //! ([`vec_env::VecEnv`]), saved policies ([`policy::Policy`]) and the native trainer
 //! ([`train::train`], [`train::evaluate`]), and a saved model driven as the deployment loop
-//! drives it, by readings from another simulator ([`driver::PolicyDriver`]). The Python package
+//! drives it, by readings from another simulator ([`driver::PolicyDriver`]), with the gripper
+//! controller's set point ([`gripper::GripperRamp`]). The Python package
 //! (python/fairgrasp) puts Gymnasium's and Stable-Baselines3's faces on them; errors cross as
 //! Python exceptions that carry the Rust message ([`errors`]).
 
@@ -12,6 +13,7 @@ mod convert;
 mod driver;
 mod env;
 mod errors;
+mod gripper;
 mod policy;
 mod train;
 mod vec_env;
@@ -24,6 +26,7 @@ fn fairgrasp_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<vec_env::VecEnv>()?;
     m.add_class::<policy::Policy>()?;
     m.add_class::<driver::PolicyDriver>()?;
+    m.add_class::<gripper::GripperRamp>()?;
     m.add_function(wrap_pyfunction!(env::list_envs, m)?)?;
     m.add_function(wrap_pyfunction!(env::env_config, m)?)?;
     m.add_function(wrap_pyfunction!(train::train, m)?)?;

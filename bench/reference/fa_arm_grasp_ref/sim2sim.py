@@ -203,6 +203,10 @@ class MujocoCell:
         d.ctrl[:6] = home
         d.qpos[self.finger_qpos] = self.finger_max
         d.ctrl[6] = self.finger_max
+        # The gripper's controller: fairgrasp's own model of a MoveGripper, the twin's too.
+        from fairgrasp import GripperRamp
+
+        self.gripper = GripperRamp(100.0)
         p = np.array(cube["position"], dtype=float)
         p[2] = cube["rest_z"] + DROP_GAP
         x, y, z, w = cube["orientation_xyzw"]
@@ -252,18 +256,24 @@ class MujocoCell:
     # ── driving ──────────────────────────────────────────────────────────────
     def drive(self, set_points: list[list[float]], gripper_open: bool) -> None:
         """One control step: each set point held for its share of the physics substeps (as
-        fairgrasp's `[control.servo]` spreads them); no set points: the arm holds its last."""
+        fairgrasp's `[control.servo]` spreads them); no set points: the arm holds its last. A
+        changed gripper command is a MoveGripper at full speed (the deployment's at speed
+        scale 1), its set point moved on every physics step as the twin's controller does."""
         d = self.data
-        d.ctrl[6] = self.finger_max if gripper_open else 0.0
+        target = 100.0 if gripper_open else 0.0
+        if self.gripper.target != target:
+            fingers = self.opening() / self.max_opening * 100.0
+            self.gripper.command(fingers, target, self.gripper.full_speed_percent_per_s)
         ticks = max(len(set_points), 1)
         done = 0
         for k in range(1, ticks + 1):
             if set_points:
                 d.ctrl[:6] = set_points[k - 1]
             until = self.substeps * k // ticks
-            if until > done:
-                mujoco.mj_step(self.model, d, nstep=until - done)
-                done = until
+            while done < until:
+                d.ctrl[6] = self.finger_max * self.gripper.advance(self.model.opt.timestep) / 100.0
+                mujoco.mj_step(self.model, d)
+                done += 1
 
     # ── the task's rule, on MuJoCo's own state ───────────────────────────────
     def touching(self, geoms: list[int]) -> bool:

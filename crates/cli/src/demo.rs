@@ -2,7 +2,8 @@
 
 use crate::SceneArgs;
 use anyhow::Result;
-use fairgrasp_sim::pick::{PickScript, SuccessRule, evaluate_scripted_pick};
+use fairgrasp_env::tasks::grasp::GraspSettings;
+use fairgrasp_sim::pick::{PickScript, evaluate_scripted_pick};
 use fairgrasp_sim::scene::Scene;
 
 #[derive(clap::Subcommand)]
@@ -45,7 +46,8 @@ fn scripted_pick(args: &ScriptedPickArgs) -> Result<()> {
         scene.config().physics.substeps
     );
     let started = std::time::Instant::now();
-    let rule = SuccessRule::default();
+    // The grasp task's own rule: the script is judged as a trained policy is.
+    let rule = GraspSettings::default().success_rule();
     let report = evaluate_scripted_pick(
         &mut scene,
         args.episodes,

@@ -189,7 +189,7 @@ fn the_jog_test_moves_each_joint_and_back_on_the_twin() {
         },
     )
     .unwrap();
-    let io = ModelIo::for_config(Default::default()).unwrap();
+    let io = ModelIo::for_config(fairgrasp_env::GraspConfig::default()).unwrap();
     let calibration = Calibration::identity(&io.limits_rad);
     let safety = SafetyConfig::default();
     let filter = SafetyFilter::new(

@@ -279,3 +279,50 @@ fn joints_move_in_step_along_the_straight_line_to_the_target() {
     let q = f.next(&target).unwrap();
     assert!((0..6).all(|i| (q[i] - target[i]).abs() < 1e-9));
 }
+
+/// A policy's targets: top-down TCP poses inside the training box of `configs/ppo_deploy.toml`
+/// (x 0.15–0.85 m, y ±0.35 m, z 25–120 mm, the fingers near the table), a new one every few
+/// servo periods as a policy acts, reached by inverse kinematics from the present set point.
+/// Checking only where braking ends, the path between set points dipped to the floor (table +
+/// 10 mm) and the filter stopped the arm within three episodes.
+#[test]
+fn a_policy_s_targets_near_the_floor_are_braked_for_never_stopped_at() {
+    use fairgrasp_env::arm::control::top_down_pose;
+    use fairgrasp_env::sim::rapier3d::na::Vector3;
+    let arm = fr5();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut sent = 0u64;
+    for episode in 0..60 {
+        let config = SafetyConfig {
+            speed_scale: [0.25, 0.5, 1.0][episode % 3],
+            ..SafetyConfig::default()
+        };
+        let mut f = filter(&arm, &config);
+        f.start(&arm.home_deg).unwrap();
+        let mut last = arm.home_deg;
+        let mut target = arm.home_deg;
+        for tick in 0..1500 {
+            if tick % 5 == 0 {
+                let tcp = Vector3::new(
+                    rng.random_range(0.15..=0.85),
+                    rng.random_range(-0.35..=0.35),
+                    rng.random_range(0.025..=0.12),
+                );
+                let pose = top_down_pose(tcp, rng.random_range(-1.5..1.5));
+                let seed: Vec<f64> = last.iter().map(|d| d.to_radians()).collect();
+                if let Ok(q) = arm.chain.inverse(&pose, &seed, 1e-4) {
+                    let q: Vec<f32> = q.iter().map(|&v| v as f32).collect();
+                    target = arm.calibration.to_robot(&q);
+                }
+            }
+            match f.next(&target) {
+                Ok(q) => {
+                    sent += 1;
+                    last = q;
+                }
+                Err(fault) => panic!("episode {episode}, tick {tick}: {fault}"),
+            }
+        }
+    }
+    assert_eq!(sent, 60 * 1500);
+}

@@ -229,9 +229,10 @@ pub trait Env: Send {
     fn close(&mut self) {}
 }
 
-/// A boxed environment is an environment: what [`crate::registry::make`] returns nests in
-/// wrappers and vector environments like a concrete one.
-impl Env for Box<dyn Env> {
+/// A boxed environment is an environment: what [`crate::registry::make`] returns (and any
+/// other boxed env, such as [`crate::arm::ArmTaskEnv`]) nests in wrappers and vector
+/// environments like a concrete one.
+impl<E: Env + ?Sized> Env for Box<E> {
     fn metadata(&self) -> Metadata {
         (**self).metadata()
     }

@@ -4,9 +4,12 @@
 //! A configuration is the env's own TOML table (for the arm tasks: `[scene]`, `[control]`,
 //! `[task]`, `[reward]`, `[randomization]`, `[shapes]`, `[render]`); keys it does not know are
 //! errors that name them. The training driver, evaluation, saved models and the Python module all go
-//! through [`make`], so a new task is usable everywhere once it is listed here.
+//! through [`make`], so a new task is usable everywhere once it is listed here. What an arm
+//! task offers beyond training ([`ArmOffer`]: a world for the twin, a model side for the
+//! deployment loop) is declared here too, so the deployment layer never names a task.
 
-use crate::arm::{ArmEnv, ArmEnvConfig, Task};
+use crate::arm::erased::{nominal_env_of, world_of};
+use crate::arm::{ArmEnv, ArmEnvConfig, ArmTaskEnv, ArmWorld, Task};
 use crate::config::from_table;
 use crate::core::Env;
 use crate::error::{EnvError, Result};
@@ -23,6 +26,35 @@ pub struct EnvSpec {
     /// The validated configuration with every key filled in, as TOML text in the order of
     /// the env's settings (`fairgrasp env config`; cheap: no scene is built).
     pub config_toml: fn(&toml::Table) -> Result<String>,
+    /// What an arm task offers outside training; `None` for envs without the arm.
+    pub arm: Option<ArmOffer>,
+}
+
+/// Builds an arm task's world from its configuration table.
+pub type WorldFn = fn(&toml::Table) -> Result<Box<dyn ArmWorld>>;
+/// Builds an arm task's nominal env from its configuration table.
+pub type DeploymentFn = fn(&toml::Table) -> Result<Box<dyn ArmTaskEnv>>;
+
+/// What an arm task offers outside training.
+pub struct ArmOffer {
+    /// Its nominal scene staged as a world, judged by the task (the twin).
+    pub world: WorldFn,
+    /// Its nominal env, which a trained model's deployment reads the model's observation,
+    /// action mapping and success rule from; `None` while the task cannot be deployed.
+    pub deployment: Option<DeploymentFn>,
+}
+
+impl ArmOffer {
+    const fn of<T: Task>(deployable: bool) -> Self {
+        Self {
+            world: world_of::<T>,
+            deployment: if deployable {
+                Some(nominal_env_of::<T>)
+            } else {
+                None
+            },
+        }
+    }
 }
 
 fn make_arm<T: Task>(table: &toml::Table) -> Result<Box<dyn Env>> {
@@ -52,18 +84,23 @@ static SPECS: &[EnvSpec] = &[
         summary: "lift an object off the table and hold it (one cube by default; random shapes with `shapes.enabled`)",
         make: make_arm::<Grasp>,
         config_toml: config_toml_arm::<Grasp>,
+        arm: Some(ArmOffer::of::<Grasp>(true)),
     },
     EnvSpec {
         id: "FaArmPickPlace-v0",
         summary: "pick the object and bring it to a random goal on the table or up to 20 cm above it",
         make: make_arm::<PickPlace>,
         config_toml: config_toml_arm::<PickPlace>,
+        // Its goal has no source on a real cell yet.
+        arm: Some(ArmOffer::of::<PickPlace>(false)),
     },
     EnvSpec {
         id: "FaArmSort-v0",
         summary: "put each object into the bin of its colour (3 objects and 2 bins by default)",
         make: make_arm::<Sort>,
         config_toml: config_toml_arm::<Sort>,
+        // Its bins have no source on a real cell yet, and its success needs the simulator.
+        arm: Some(ArmOffer::of::<Sort>(false)),
     },
     EnvSpec {
         id: "Pendulum-v1",
@@ -73,6 +110,7 @@ static SPECS: &[EnvSpec] = &[
             Ok(Box::new(Pendulum::new()))
         },
         config_toml: |t| no_settings("Pendulum-v1", t).map(|_| String::new()),
+        arm: None,
     },
     EnvSpec {
         id: "PointReach-v0",
@@ -82,6 +120,7 @@ static SPECS: &[EnvSpec] = &[
             Ok(Box::new(PointReach::new()))
         },
         config_toml: |t| no_settings("PointReach-v0", t).map(|_| String::new()),
+        arm: None,
     },
 ];
 
@@ -106,6 +145,33 @@ pub fn spec(id: &str) -> Result<&'static EnvSpec> {
             ),
         )
     })
+}
+
+/// The ids of the arm tasks (those with an [`ArmOffer`]).
+pub fn arm_ids() -> Vec<&'static str> {
+    SPECS
+        .iter()
+        .filter(|s| s.arm.is_some())
+        .map(|s| s.id)
+        .collect()
+}
+
+/// The ids of the arm tasks whose trained models can be deployed.
+pub fn deployable_ids() -> Vec<&'static str> {
+    SPECS
+        .iter()
+        .filter(|s| s.arm.as_ref().is_some_and(|a| a.deployment.is_some()))
+        .map(|s| s.id)
+        .collect()
+}
+
+/// What arm task `id` offers outside training; `None` when `id` is not an arm task (or not
+/// registered).
+pub fn arm_offer(id: &str) -> Option<&'static ArmOffer> {
+    SPECS
+        .iter()
+        .find(|s| s.id == id)
+        .and_then(|s| s.arm.as_ref())
 }
 
 /// Builds environment `id` from its configuration table (Gymnasium's `make`).

@@ -1,8 +1,9 @@
 //! The grasp environment's contract: spaces, seeding, clipping, errors, rewards, termination.
 
-use fairgrasp_env::arm::ActionMode;
+use fairgrasp_env::arm::{ActionMode, Task};
 use fairgrasp_env::core::EpisodeEvent;
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
+use fairgrasp_env::sim::pick::{GraspStatus, SuccessTracker};
 use fairgrasp_env::tasks::grasp::{GraspConfig as EnvConfig, ObservationPreset, RewardKind};
 use fairgrasp_env::{Env, EnvError, GraspEnv};
 use rand::SeedableRng;
@@ -460,4 +461,44 @@ fn the_servo_model_caps_the_drive_targets_and_still_lets_the_arm_grasp() {
         "without the model the target jumps: {free} rad"
     );
     assert!(grasps_free && grasps_servoed);
+}
+
+/// One success rule: the judge the task hands the deployment loop, the scripted pick's reading
+/// of the scene against the task's rule, and training's success agree at every step.
+#[test]
+fn the_deployment_judge_the_scripted_picks_rule_and_training_agree() {
+    let mut env = env_with(|c| c.task.success_hold_steps = 5);
+    let mut successes = 0;
+    for seed in 0..4 {
+        env.reset(Some(2000 + seed)).unwrap();
+        let mut judge = env.task().success_judge().unwrap();
+        let mut tracker = SuccessTracker::new(env.config().task.success_rule());
+        let mut policy = ScriptedGraspPolicy::new(&env);
+        loop {
+            let action = policy.act(&env);
+            let step = env.step(&action).unwrap();
+            let state = env.state().unwrap();
+            let status = GraspStatus::of(env.scene(), 0);
+            assert_eq!(status.closed_on_object, state.grasped(0));
+            assert_eq!(judge.update(state), step.info.success);
+            assert_eq!(tracker.update(&status), step.info.success);
+            if step.terminated || step.truncated {
+                successes += step.info.success as u32;
+                break;
+            }
+        }
+    }
+    assert!(successes >= 3, "{successes}/4 scripted successes");
+}
+
+/// The task's defaults come from the scripted pick's rule, unchanged in training's f32.
+#[test]
+fn the_default_rule_is_the_scripted_picks() {
+    let task = EnvConfig::default().task;
+    let figures = (
+        task.success_min_lift,
+        task.success_max_offset,
+        task.success_hold_steps,
+    );
+    assert_eq!(figures, (0.05, 0.08, 10));
 }

@@ -99,3 +99,52 @@ fn the_same_seed_gives_the_same_episode_through_the_registry() {
         assert_eq!(run(), run(), "{id}");
     }
 }
+
+#[test]
+fn the_registry_says_what_each_arm_task_offers_outside_training() {
+    assert_eq!(
+        registry::arm_ids(),
+        ["FaArmGrasp-v0", "FaArmPickPlace-v0", "FaArmSort-v0"]
+    );
+    assert_eq!(registry::deployable_ids(), ["FaArmGrasp-v0"]);
+    assert!(registry::arm_offer("Pendulum-v1").is_none());
+    assert!(registry::arm_offer("NoSuchEnv-v0").is_none());
+    for id in registry::arm_ids() {
+        let offer = registry::arm_offer(id).unwrap();
+        let mut world = (offer.world)(&toml::Table::new()).unwrap();
+        world.start_episode(4).unwrap();
+        let state = fairgrasp_env::ArmState::from_scene(world.scene());
+        assert!(!world.evaluate(&state).success, "{id}");
+        if let Some(deployment) = offer.deployment {
+            let env = deployment(&toml::Table::new()).unwrap();
+            assert!(env.success_judge().is_some(), "{id}");
+        }
+    }
+    // Bad settings are the env's own errors.
+    let offer = registry::arm_offer("FaArmGrasp-v0").unwrap();
+    assert!((offer.world)(&table("nonsense = 1")).is_err());
+}
+
+/// The twin's world is the env's nominal world: each episode starts as the env's reset does
+/// with randomisation off, random shapes included, whatever the settings' randomisation.
+#[test]
+fn an_arm_world_starts_its_episodes_as_the_nominal_env_resets() {
+    use fairgrasp_env::GraspEnv;
+    let settings = table("[shapes]\nenabled = true\n[randomization]\nenabled = true");
+    let mut world = (registry::arm_offer("FaArmGrasp-v0").unwrap().world)(&settings).unwrap();
+    let mut nominal = settings.clone();
+    nominal.insert("randomization".into(), table("enabled = false").into());
+    let mut env = GraspEnv::new(fairgrasp_env::config::from_table(nominal).unwrap()).unwrap();
+    for seed in [0, 7, 11] {
+        world.start_episode(seed).unwrap();
+        env.reset(Some(seed)).unwrap();
+        let (a, b) = (world.scene(), env.scene());
+        assert_eq!(
+            a.object_state(0).pose,
+            b.object_state(0).pose,
+            "seed {seed}"
+        );
+        assert_eq!(a.object_half_extents(0), b.object_half_extents(0));
+        assert_eq!(a.arm_positions(), b.arm_positions());
+    }
+}

@@ -1,4 +1,6 @@
-//! A scripted top-down pick, and the grasp task's success rule.
+//! A scripted top-down pick, and the primitive of the grasp task's success rule: the env's
+//! grasp task configures a [`SuccessRule`] from its `[task]` settings and judges its states by
+//! it, so the scripted pick, training, the twin and the deployment loop apply one rule.
 //!
 //! The script: open, move above an object with the fingers across its narrowest width, descend,
 //! close, lift, hold. It drives the arm only through joint position targets (what a policy will do), so
@@ -12,8 +14,9 @@ use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::fmt;
 
-/// The task's success rule: gripper closed on the object, object lifted, object centred in the
-/// gripper, all held for a number of consecutive control steps.
+/// The grasp task's success rule: gripper closed on the object, object lifted, object centred
+/// in the gripper, all held for a number of consecutive control steps. The defaults are the
+/// grasp task's.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SuccessRule {
     /// Lift of the object's centre above its resting height (m).
@@ -34,11 +37,20 @@ impl Default for SuccessRule {
     }
 }
 
+/// The smallest opening at which closed fingers are stopped by an object rather than by each
+/// other (m).
+pub const MIN_HELD_OPENING: f32 = 0.005;
+
+/// Whether the gripper holds an object: commanded closed (`closing`), both pads touching it,
+/// and the fingers stopped by it (`opening` above [`MIN_HELD_OPENING`]).
+pub fn closed_on_object(closing: bool, pad_contacts: [bool; 2], opening: f32) -> bool {
+    closing && pad_contacts[0] && pad_contacts[1] && opening > MIN_HELD_OPENING
+}
+
 /// What the success rule sees at one control step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GraspStatus {
-    /// The gripper is commanded closed, both pads touch the object and the fingers are stopped
-    /// by it (opening above 5 mm).
+    /// The gripper holds the object ([`closed_on_object`]).
     pub closed_on_object: bool,
     /// Object centre height above its resting height (m).
     pub lift: f64,
@@ -49,11 +61,11 @@ pub struct GraspStatus {
 impl GraspStatus {
     /// Reads the scene about object `object` (its index).
     pub fn of(scene: &Scene, object: usize) -> Self {
-        let contacts = scene.finger_contacts(object);
-        let closed_on_object = scene.gripper_target() < scene.max_opening() * 0.5
-            && contacts[0]
-            && contacts[1]
-            && scene.gripper_opening() > 0.005;
+        let closed_on_object = closed_on_object(
+            scene.gripper_commanded_closed(),
+            scene.finger_contacts(object),
+            scene.gripper_opening(),
+        );
         let centre = scene.object_state(object).pose.translation.vector;
         let tcp = scene.tcp_pose().translation.vector;
         Self {

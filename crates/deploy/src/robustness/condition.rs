@@ -13,10 +13,14 @@ use fairgrasp_sim::scene::SceneConfig;
 pub fn nominal_of(env_id: &str, base: &toml::Table) -> Result<Nominal> {
     let what = format!("the environment of the model ({env_id})");
     let full = registry::effective_config(env_id, base)?;
-    if !full.contains_key("randomization") {
+    if registry::arm_offer(env_id).is_none() {
         return Err(DeployError::config(
             what,
-            "has no [randomization] section: robustness is measured on the arm tasks",
+            format!(
+                "is not an arm task (no [randomization] to pin): robustness is measured on \
+                 the arm tasks ({})",
+                registry::arm_ids().join(", ")
+            ),
         ));
     }
     let scene: SceneConfig = match full.get("scene") {

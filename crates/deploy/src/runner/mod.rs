@@ -32,7 +32,6 @@ use crate::kinematics::tcp_forward_kinematics;
 use crate::pose_source::PoseSource;
 use crate::robot::{RobotCommand, RobotLink};
 use crate::safety::{Fault, SafetyConfig, SafetyFilter, Watchdog};
-use fairgrasp_env::tasks::grasp::Streak;
 use fairgrasp_rl::policies::Policy;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -200,10 +199,14 @@ impl Deployment {
     /// Every way the policy will meet the arm otherwise than it learnt: for the operator's
     /// warnings before anything moves.
     pub fn mismatches(&self) -> Vec<String> {
-        [self.motion_mismatch(), self.observation_mismatch()]
-            .into_iter()
-            .flatten()
-            .collect()
+        [
+            self.motion_mismatch(),
+            self.io.gripper_mismatch(),
+            self.observation_mismatch(),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// The home pose in robot degrees.
@@ -415,8 +418,7 @@ impl Deployment {
         let mut shown = vec![0.0; self.policy.act_dim()];
         let steps = self.options.max_steps.unwrap_or(self.io.max_steps);
         let mut ik_failures = 0;
-        let rule = self.io.task().clone();
-        let mut streak = Streak::default();
+        let mut success = self.io.success_judge();
         let mut acted = steps;
         let mut clock = ServoClock::new(self.link.now(), self.tick);
         for step in 0..steps {
@@ -439,9 +441,7 @@ impl Deployment {
                     closing,
                     self.link.now(),
                 );
-                if self.options.end_at_success
-                    && streak.update(rule.holds(&state)) >= rule.success_hold_steps
-                {
+                if self.options.end_at_success && success.update(&state) {
                     acted = step;
                     let target = self.calibration.to_robot(&command.arm_target);
                     for k in 0..self.options.hold_after_success as u64 {

@@ -1,21 +1,24 @@
 //! The trained model's side of the loop: its env rebuilt from the model's settings (never
-//! stepped) supplies the observation layout, the action mapping, the home pose and the object
-//! facts — the same code the policy was trained through.
+//! stepped) supplies the observation layout, the action mapping, the home pose, the object
+//! facts and the task's success rule — the same code the policy was trained through. The env
+//! registry builds it from the model's env id ([`fairgrasp_env::registry::ArmOffer`]), so the
+//! loop serves whichever task the registry offers for deployment.
 
 use crate::error::{DeployError, Result};
 use crate::safety::SafetyConfig;
-use fairgrasp_env::arm::ServoConfig;
-use fairgrasp_env::arm::{ActionMode, ArmState, Command, EstimatorFacts};
+use fairgrasp_env::Env;
+use fairgrasp_env::arm::erased::nominal_env;
+use fairgrasp_env::arm::{ActionMode, ArmState, Command, EstimatorFacts, SuccessJudge};
+use fairgrasp_env::arm::{ArmEnvConfig, ArmTaskEnv, ServoConfig, Task, TaskSettings};
+use fairgrasp_env::registry;
 use fairgrasp_env::sim::kinematics::SerialChain;
 use fairgrasp_env::sim::scene::ArmDrive;
-use fairgrasp_env::tasks::grasp::GraspSettings;
 use fairgrasp_env::wrappers::RescaleAction;
-use fairgrasp_env::{Env, GraspConfig, GraspEnv};
 use fairgrasp_rl::policies::Policy;
 
 /// What the deployment loop needs of the model's environment.
 pub struct ModelIo {
-    env: RescaleAction<GraspEnv>,
+    env: RescaleAction<Box<dyn ArmTaskEnv>>,
     /// Base → TCP, the chain the policy's TCP observations came from.
     pub chain: SerialChain,
     /// The state of the freshly reset env: home pose, table, object's size and rest height.
@@ -28,23 +31,12 @@ pub struct ModelIo {
 }
 
 impl ModelIo {
-    /// Rebuilds the model's env. Only the grasp task can be deployed today: pick-and-place
-    /// and sorting need a goal and bins from the real world, which no source provides yet.
+    /// Rebuilds the model's env. Only the tasks the registry offers for deployment can be
+    /// deployed (the grasp task today: pick-and-place and sorting need a goal and bins from the
+    /// real world, which no source provides yet).
     pub fn for_policy(policy: &Policy) -> Result<Self> {
-        if policy.env_id() != fairgrasp_env::ENV_ID {
-            return Err(DeployError::config(
-                "model",
-                format!(
-                    "trained on {}; deployment supports {} (the other tasks need goals and \
-                     bins from the real world)",
-                    policy.env_id(),
-                    fairgrasp_env::ENV_ID
-                ),
-            ));
-        }
         let table = fairgrasp_rl::model::env_table(policy.env_config())?;
-        let config: GraspConfig = fairgrasp_env::config::from_table(table)?;
-        let io = Self::for_config(config)?;
+        let io = Self::for_env(policy.env_id(), &table)?;
         let inner = io.env.inner();
         if inner.observation_space().dim() != policy.obs_dim()
             || inner.action_space().dim() != policy.act_dim()
@@ -64,14 +56,41 @@ impl ModelIo {
         Ok(io)
     }
 
-    /// The grasp env with these settings (the robot, its home pose and limits, the table):
-    /// what the commissioning steps need when no model is given.
-    pub fn for_config(mut config: GraspConfig) -> Result<Self> {
-        // The nominal world: a model trained with domain randomisation must not find its home
-        // pose jittered or its object resized here (observation noise is never added outside
-        // `step` anyway).
-        config.randomization.enabled = false;
-        let mut env = RescaleAction::new(GraspEnv::new(config)?)?;
+    /// Env `env_id` with the settings `table`, as the registry offers it for deployment.
+    pub fn for_env(env_id: &str, table: &toml::Table) -> Result<Self> {
+        let offer = registry::arm_offer(env_id).and_then(|a| a.deployment);
+        let Some(build) = offer else {
+            return Err(DeployError::config(
+                "model",
+                format!(
+                    "trained on {env_id}; deployment supports {} (the other tasks need goals \
+                     and bins from the real world)",
+                    registry::deployable_ids().join(", ")
+                ),
+            ));
+        };
+        Self::nominal(build(table)?)
+    }
+
+    /// The env of a typed arm-task configuration (the robot, its home pose and limits, the
+    /// table): what the commissioning steps need when no model is given.
+    pub fn for_config<S: TaskSettings>(
+        config: ArmEnvConfig<S, <S::Task as Task>::Reward>,
+    ) -> Result<Self> {
+        Self::nominal(nominal_env(config)?)
+    }
+
+    /// `env` (built without randomisation) at its nominal state: a model trained with domain
+    /// randomisation must not find its home pose jittered or its object resized here
+    /// (observation noise is never added outside `step` anyway).
+    fn nominal(env: Box<dyn ArmTaskEnv>) -> Result<Self> {
+        if env.success_judge().is_none() {
+            return Err(DeployError::config(
+                "model",
+                "its task's success needs the simulator; the deployment judges the arm's states",
+            ));
+        }
+        let mut env = RescaleAction::new(env)?;
         env.reset(Some(0))?;
         let inner = env.inner();
         let scene = inner.scene();
@@ -84,17 +103,18 @@ impl ModelIo {
             facts: EstimatorFacts::new(chain.clone(), &nominal),
             chain,
             control_period: scene.control_period() as f64,
-            max_steps: inner.config().task.max_episode_steps,
+            max_steps: inner.max_episode_steps(),
             limits_rad: scene.arm_limits(),
             nominal,
             env,
         })
     }
 
-    /// The model's `[task]` settings: the success rule ([`GraspSettings::holds`] for
-    /// `success_hold_steps` control steps) that ended its training episodes.
-    pub fn task(&self) -> &GraspSettings {
-        &self.env.inner().config().task
+    /// The task's success rule, fresh for an episode: the rule that ended the model's training
+    /// episodes, applied to the states the deployment estimates.
+    pub fn success_judge(&self) -> Box<dyn SuccessJudge> {
+        // Checked in `nominal`: every ModelIo's task judges states alone.
+        (self.env.inner().success_judge()).expect("checked when the ModelIo was built")
     }
 
     /// The motion model the policy was trained through (`[control.servo]`).
@@ -135,9 +155,22 @@ impl ModelIo {
         let differs = |a: f64, b: f64| (a - b).abs() > 1e-3 * a.abs().max(1.0);
         (differs(trained.0, here.0) || differs(trained.1, here.1)).then(|| {
             format!(
-                "the model trained with caps of {} deg/s and {} deg/s²; the safety settings                  allow {} deg/s and {} deg/s² at scale 1, so the arm will not move as it learnt",
+                "the model trained with caps of {} deg/s and {} deg/s²; the safety settings \
+                 allow {} deg/s and {} deg/s² at scale 1, so the arm will not move as it learnt",
                 trained.0, trained.1, here.0, here.1
             )
+        })
+    }
+
+    /// Why the gripper will not move as the policy learnt, if it will not: a model trained with
+    /// the fingers' target jumping (without `[control.gripper]`) meets a `MoveGripper` whose set
+    /// point ramps.
+    pub fn gripper_mismatch(&self) -> Option<String> {
+        (!self.env.inner().mapper().config().gripper.enabled).then(|| {
+            "this model was trained with the fingers' target jumping to open or closed, not \
+             through the gripper's MoveGripper ramp; two of five such policies grasped 50 % and \
+             86 % of deployment-matched episodes at scale 1 (train with configs/ppo_deploy.toml)"
+                .into()
         })
     }
 
@@ -145,7 +178,7 @@ impl ModelIo {
     /// trained on the simulator's true state (without `[readings]`) saw true pad contacts and
     /// exact openings that the deployment only infers.
     pub fn observation_mismatch(&self) -> Option<String> {
-        (!self.env.inner().config().readings.enabled).then(|| {
+        (!self.env.inner().readings().enabled).then(|| {
             "this model observed the simulator's true state in training, not the controller's \
              readings the deployment builds its observation from (pad contacts, the gripper in \
              whole percent, the object's feed); expect it to grasp less often than in simulation \
@@ -223,6 +256,29 @@ mod tests {
         config.scene.arm.kinematic_acc_deg_s2 = 2000.0;
         let snappier = ModelIo::for_config(config).unwrap();
         assert!(snappier.motion_mismatch(&safety).unwrap().contains("2000"));
+    }
+
+    #[test]
+    fn a_model_trained_with_a_jumping_finger_target_is_flagged() {
+        let plain = ModelIo::for_config(GraspConfig::default()).unwrap();
+        assert!(plain.gripper_mismatch().unwrap().contains("MoveGripper"));
+        let mut config = GraspConfig::default();
+        config.control.gripper.enabled = true;
+        let ramped = ModelIo::for_config(config).unwrap();
+        assert_eq!(ramped.gripper_mismatch(), None);
+    }
+
+    #[test]
+    fn only_the_tasks_the_registry_offers_for_deployment_are_deployed() {
+        let table = toml::Table::new();
+        assert!(ModelIo::for_env("FaArmGrasp-v0", &table).is_ok());
+        for id in ["FaArmPickPlace-v0", "Pendulum-v1", "NoSuchEnv-v0"] {
+            let e = ModelIo::for_env(id, &table).err().unwrap().to_string();
+            assert!(
+                e.contains(id) && e.contains("supports FaArmGrasp-v0"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

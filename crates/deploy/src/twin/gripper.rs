@@ -1,17 +1,18 @@
 //! The twin's gripper as the controller sees it: activation, a commanded position in % of the
-//! stroke (0 closed … 100 open) reached at the command's speed, and "motion done" when the
-//! fingers arrive, stall on an object or run out of the command's time.
+//! stroke (0 closed … 100 open) reached at the command's speed (the [`GripperRamp`] training's
+//! `[control.gripper]` moves the simulated fingers through), and "motion done" when the fingers
+//! arrive, stall on an object or run out of the command's time.
+
+use fairgrasp_sim::control::{FINGERS_FULL_SPEED_PERCENT_PER_S, GripperRamp};
 
 /// Position error that counts as arrived (% of the stroke).
 const ARRIVED_PERCENT: f64 = 1.0;
 /// Movement smaller than this (%) over [`STALL_SECONDS`] is a stall (fingers on an object).
 const PROGRESS_PERCENT: f64 = 0.3;
 const STALL_SECONDS: f64 = 0.15;
-/// The set point's speed at 100 % (% of the stroke per second): the simulated fingers' own,
-/// which open or close by 46 of their 90 mm in one 1/30 s control step once moving (measured in
-/// training episodes), so at 100 % the ramp leaves their motion as trained and at `s` % it
-/// takes 100/`s` times as long, as the deployment's speed scale slows the arm.
-pub const FULL_SPEED_PERCENT_PER_S: f64 = 1500.0;
+/// The set point's speed at 100 % (% of the stroke per second): the simulated fingers' own, so
+/// at `s` % a move takes 100/`s` times as long, as the deployment's speed scale slows the arm.
+pub const FULL_SPEED_PERCENT_PER_S: f64 = FINGERS_FULL_SPEED_PERCENT_PER_S;
 
 /// The gripper state machine.
 #[derive(Clone, Debug)]
@@ -19,11 +20,9 @@ pub struct Gripper {
     pub active: bool,
     /// Commanded position (%).
     pub target: f64,
-    /// Where the fingers are sent now (%): moves towards `target` at `speed`.
-    setpoint: f64,
-    /// % of the stroke per second.
-    speed: f64,
-    /// When `setpoint` was last advanced (s).
+    /// Where the fingers are sent now.
+    ramp: GripperRamp,
+    /// When the ramp was last advanced (s).
     ramped_at: f64,
     /// Measured position (%).
     pub position: f64,
@@ -42,8 +41,7 @@ impl Gripper {
         Self {
             active,
             target: 100.0,
-            setpoint: 100.0,
-            speed: FULL_SPEED_PERCENT_PER_S,
+            ramp: GripperRamp::at(100.0),
             ramped_at: 0.0,
             position: 100.0,
             done: true,
@@ -58,10 +56,9 @@ impl Gripper {
     /// gives up after `max_time` s; returns its number.
     pub fn command(&mut self, now: f64, percent: f64, speed_percent: f64, max_time: f64) -> u64 {
         self.target = percent.clamp(0.0, 100.0);
-        // From where the fingers are: after a stall on an object the set point had run ahead.
-        self.setpoint = self.position;
+        let speed = speed_percent.clamp(1.0, 100.0) / 100.0 * FULL_SPEED_PERCENT_PER_S;
+        self.ramp.command(self.position, self.target, speed);
         self.ramped_at = now;
-        self.speed = speed_percent.clamp(1.0, 100.0) / 100.0 * FULL_SPEED_PERCENT_PER_S;
         self.done = (self.position - self.target).abs() < ARRIVED_PERCENT;
         self.commanded_at = now;
         self.max_time = max_time;
@@ -72,10 +69,9 @@ impl Gripper {
 
     /// The position the fingers are sent to at `now` (%).
     pub fn setpoint(&mut self, now: f64) -> f64 {
-        let step = self.speed * (now - self.ramped_at).max(0.0);
+        let dt = now - self.ramped_at;
         self.ramped_at = now;
-        self.setpoint += (self.target - self.setpoint).clamp(-step, step);
-        self.setpoint
+        self.ramp.advance(dt)
     }
 
     /// Feeds the measured position (%).
@@ -97,7 +93,7 @@ impl Gripper {
     pub fn hold_at(&mut self, position: f64) {
         self.position = position;
         self.target = position;
-        self.setpoint = position;
+        self.ramp = GripperRamp::at(position);
         self.done = true;
     }
 }

@@ -1,92 +1,21 @@
 //! The twin's physical world: an arm task's scene (the FR5, its gripper, the table, the
 //! objects) and the task's own judge of each episode.
 //!
-//! The world is the task's *nominal* scene: no domain randomisation (the real world does not
-//! change between episodes), the configured object mass and friction; random object shapes are
-//! drawn when the environment's `[shapes]` section enables them. Episodes are judged by the
-//! task's [`Task::evaluate`] on [`ArmState::from_scene`], once per control period, as in
-//! training: success and failure (an object off the table) latch until the next reset.
+//! The world is what the env registry offers for the task ([`ArmWorld`]): its *nominal* scene,
+//! with no domain randomisation (the real world does not change between episodes), the
+//! configured object mass and friction; random object shapes are drawn when the environment's
+//! `[shapes]` section enables them. Episodes are judged by the task's own evaluation on
+//! [`ArmState::from_scene`], once per control period, as in training: success and failure (an
+//! object off the table) latch until the next reset.
 
 use super::controller::{Measured, Setpoint};
 use crate::error::{DeployError, Result};
-use fairgrasp_env::arm::{ArmEnvConfig, ArmState, Evaluation, Task};
-use fairgrasp_env::tasks::grasp::Grasp;
-use fairgrasp_env::tasks::pick_place::PickPlace;
-use fairgrasp_env::tasks::sort::Sort;
+use fairgrasp_env::arm::{ArmState, ArmWorld};
+use fairgrasp_env::registry;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::Isometry3;
 use fairgrasp_sim::scene::Scene;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-
-/// What the twin needs of an arm task, whatever its settings types.
-trait TaskScene: Send {
-    fn scene(&self) -> &Scene;
-    fn scene_mut(&mut self) -> &mut Scene;
-    /// Arm at home, objects placed by the task from `seed`, scene settled.
-    fn start_episode(&mut self, seed: u64) -> Result<()>;
-    fn evaluate(&mut self, state: &ArmState) -> Evaluation;
-}
-
-struct ArmTask<T: Task> {
-    config: ArmEnvConfig<T::Settings, T::Reward>,
-    scene: Scene,
-    task: T,
-}
-
-impl<T: Task> ArmTask<T> {
-    fn build(table: &toml::Table) -> Result<Box<dyn TaskScene>> {
-        let config: ArmEnvConfig<T::Settings, T::Reward> =
-            fairgrasp_env::config::from_table(table.clone())?;
-        config.validate()?;
-        let mut scene_config = config.scene.clone();
-        T::configure_scene(&config, &mut scene_config)?;
-        let scene = Scene::new(scene_config).map_err(fairgrasp_env::EnvError::from)?;
-        let task = T::new(&config, &scene)?;
-        Ok(Box::new(Self {
-            config,
-            scene,
-            task,
-        }))
-    }
-}
-
-impl<T: Task> TaskScene for ArmTask<T> {
-    fn scene(&self) -> &Scene {
-        &self.scene
-    }
-
-    fn scene_mut(&mut self) -> &mut Scene {
-        &mut self.scene
-    }
-
-    fn start_episode(&mut self, seed: u64) -> Result<()> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
-        self.scene
-            .restore_home(&self.scene.nominal_params(), &[])
-            .map_err(sim)?;
-        if self.config.shapes.enabled {
-            for i in 0..self.scene.num_objects() {
-                let nominal = self.scene.config().objects[i].clone();
-                let shape = fairgrasp_env::tasks::shapes::draw(&self.config.shapes, &mut rng);
-                self.scene
-                    .set_object_params(i, &shape, nominal.mass, nominal.friction)
-                    .map_err(sim)?;
-            }
-        }
-        self.task.initialize_episode(&mut self.scene, &mut rng)?;
-        Ok(())
-    }
-
-    fn evaluate(&mut self, state: &ArmState) -> Evaluation {
-        self.task.evaluate(&self.scene, state)
-    }
-}
-
-/// The arm tasks the twin can stage.
-pub const TASK_IDS: [&str; 3] = ["FaArmGrasp-v0", "FaArmPickPlace-v0", "FaArmSort-v0"];
 
 /// How one episode went, by the task's rule.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -124,7 +53,7 @@ const DRIVE_LEARN_SPEED: f64 = 5.0;
 /// controller commands them.
 pub struct World {
     env_id: String,
-    inner: Box<dyn TaskScene>,
+    inner: Box<dyn ArmWorld>,
     chain: SerialChain,
     substeps: u32,
     physics_steps: u64,
@@ -134,23 +63,19 @@ pub struct World {
 }
 
 impl World {
-    /// Builds `env_id` (one of [`TASK_IDS`]) from its configuration table and starts episode 1
-    /// from `seed`.
+    /// Builds `env_id` (one of the registry's arm tasks) from its configuration table and
+    /// starts episode 1 from `seed`.
     pub fn new(env_id: &str, table: &toml::Table, seed: u64) -> Result<Self> {
-        let inner = match env_id {
-            "FaArmGrasp-v0" => ArmTask::<Grasp>::build(table)?,
-            "FaArmPickPlace-v0" => ArmTask::<PickPlace>::build(table)?,
-            "FaArmSort-v0" => ArmTask::<Sort>::build(table)?,
-            other => {
-                return Err(DeployError::config(
-                    "--env",
-                    format!(
-                        "the twin stages the arm tasks ({}), not `{other}`",
-                        TASK_IDS.join(", ")
-                    ),
-                ));
-            }
-        };
+        let offer = registry::arm_offer(env_id).ok_or_else(|| {
+            DeployError::config(
+                "--env",
+                format!(
+                    "the twin stages the arm tasks ({}), not `{env_id}`",
+                    registry::arm_ids().join(", ")
+                ),
+            )
+        })?;
+        let inner = (offer.world)(table)?;
         let scene = inner.scene();
         let chain = SerialChain::new(&scene.robot().model, "tcp")
             .map_err(|e| DeployError::Env(e.into()))?;

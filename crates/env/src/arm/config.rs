@@ -1,6 +1,7 @@
 //! The configuration every arm task shares — scene, control, randomisation, object shapes —
 //! around the task's own `[task]` and `[reward]` sections.
 
+use crate::arm::Task;
 use crate::arm::control::ControlConfig;
 use crate::arm::readings::ReadingsConfig;
 use crate::config::{check_non_negative, check_range};
@@ -17,6 +18,10 @@ use std::path::PathBuf;
 pub trait TaskSettings:
     Clone + Debug + Default + PartialEq + Serialize + DeserializeOwned + Send + 'static
 {
+    /// The task these settings configure: lets code holding a typed configuration build its
+    /// env without naming the task ([`crate::arm::erased::nominal_env`]).
+    type Task: Task<Settings = Self>;
+
     /// Control steps before the episode is truncated.
     fn max_episode_steps(&self) -> u32;
     fn render_mode(&self) -> Option<RenderMode>;

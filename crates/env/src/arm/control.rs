@@ -6,6 +6,7 @@
 //! within a few steps of the measured joints (the lead cap) and the joint limits; Cartesian mode
 //! also keeps the commanded TCP inside a workspace box.
 
+use crate::arm::gripper::GripperConfig;
 use crate::arm::servo::ServoConfig;
 use crate::arm::state::ArmState;
 use crate::error::{EnvError, Result};
@@ -46,6 +47,9 @@ pub struct ControlConfig {
     /// The deployment's motion model: joint targets reach the drives through speed- and
     /// acceleration-capped set points every servo period ([`crate::arm::servo`]).
     pub servo: ServoConfig,
+    /// The gripper's controller: the fingers move through its set point
+    /// ([`crate::arm::gripper`]).
+    pub gripper: GripperConfig,
 }
 
 impl Default for ControlConfig {
@@ -61,6 +65,7 @@ impl Default for ControlConfig {
             workspace_min: [0.15, -0.35, 0.015],
             workspace_max: [0.85, 0.35, 0.45],
             servo: ServoConfig::default(),
+            gripper: GripperConfig::default(),
         }
     }
 }
@@ -81,6 +86,7 @@ impl ControlConfig {
         positive("control.max_tcp_delta", self.max_tcp_delta, 0.1)?;
         positive("control.max_yaw_delta", self.max_yaw_delta, 0.5)?;
         positive("control.lead_steps", self.lead_steps, 20.0)?;
+        self.gripper.validate()?;
         positive("control.servo.period_ms", self.servo.period_ms, 100.0)?;
         positive(
             "control.servo.max_joint_speed_deg_s",

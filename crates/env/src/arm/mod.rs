@@ -13,6 +13,8 @@
 
 pub mod config;
 pub mod control;
+pub mod erased;
+pub mod gripper;
 pub mod observation;
 pub mod readings;
 pub mod servo;
@@ -23,6 +25,8 @@ pub use config::{
     TaskSettings,
 };
 pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
+pub use erased::{ArmTaskEnv, ArmWorld, SuccessJudge};
+pub use gripper::{GripperConfig, GripperDrive};
 pub use observation::{NoiseGroup, ObsWriter};
 pub use readings::{ControllerReading, EstimatorFacts, ReadingsConfig, StateEstimator};
 pub use servo::{JointRamp, ServoConfig};
@@ -82,6 +86,13 @@ pub trait Task: Send + Sized + 'static {
     /// Evaluates the step just taken.
     fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation;
 
+    /// The success rule `evaluate` applies, as a judge of states alone for a new episode (the
+    /// deployment loop judges its estimated states by it); `None` when success needs the
+    /// simulator (sorting's bins).
+    fn success_judge(&self) -> Option<Box<dyn SuccessJudge>> {
+        None
+    }
+
     /// The reward of the step just taken, by term. `steps_left` counts the control steps left
     /// before the time limit.
     fn reward(&mut self, evaluation: &Evaluation, state: &ArmState, steps_left: u32)
@@ -111,6 +122,8 @@ struct Episode {
     last_obs: Vec<f32>,
     /// The servo set points (physical joints, rad), when `[control.servo]` is on.
     ramp: Option<JointRamp>,
+    /// The gripper's set point, when `[control.gripper]` is on.
+    gripper: Option<GripperDrive>,
     /// With `[readings]`: the estimator and the state it built from this step's readings,
     /// which the policy and the action mapping see.
     estimator: Option<StateEstimator>,
@@ -550,6 +563,11 @@ impl<T: Task> Env for ArmEnv<T> {
         let obs = self.observe(view, &previous_action);
         let no_op = self.no_op_action();
         let ramp = self.config.control.servo.ramp(&self.scene);
+        let gripper = self
+            .config
+            .control
+            .gripper
+            .drive(&self.scene, &mut self.rng);
         self.episode = Some(Episode {
             steps: 0,
             done: false,
@@ -560,6 +578,7 @@ impl<T: Task> Env for ArmEnv<T> {
             reported,
             last_obs: obs.clone(),
             ramp,
+            gripper,
             estimator,
             observed,
         });
@@ -608,7 +627,10 @@ impl<T: Task> Env for ArmEnv<T> {
                 .map(|(t, e)| t - e)
                 .collect()
         };
-        self.scene.set_gripper_open(episode.command.gripper_open)?;
+        match episode.gripper.as_mut() {
+            None => self.scene.set_gripper_open(episode.command.gripper_open)?,
+            Some(g) => g.command(&self.scene, episode.command.gripper_open),
+        }
         // With `[readings]`, the readings may be this many substeps older than the step's end.
         let substeps = self.scene.config().physics.substeps;
         let age = match &self.config.readings {
@@ -625,15 +647,23 @@ impl<T: Task> Env for ArmEnv<T> {
                 early = Some(ArmState::from_scene(scene));
             }
         };
+        let mut gripper = episode.gripper.as_mut();
+        let mut drive_gripper = |scene: &mut Scene| match gripper.as_mut() {
+            Some(g) => g.drive(scene),
+            None => Ok(()),
+        };
         let stepped = match episode.ramp.as_mut() {
             None => self.scene.set_arm_targets(&physical).and_then(|()| {
                 for done in 1..=substeps {
+                    drive_gripper(&mut self.scene)?;
                     self.scene.step_physics()?;
                     read_early(&self.scene, done);
                 }
                 self.scene.check_finite()
             }),
-            Some(ramp) => servo::step_servoed(&mut self.scene, ramp, &physical, read_early),
+            Some(ramp) => {
+                servo::step_servoed(&mut self.scene, ramp, &physical, drive_gripper, read_early)
+            }
         };
         match stepped {
             Ok(()) => {}

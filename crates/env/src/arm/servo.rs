@@ -65,12 +65,13 @@ pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
 }
 
 /// One control step through the servo ramp: a set point every servo period, each held by the
-/// drives for that period's share of the physics substeps. `after_substep` sees the scene after
-/// each physics substep with the count done.
+/// drives for that period's share of the physics substeps. `before_substep` may drive the scene
+/// before each physics substep; `after_substep` sees it after, with the count done.
 pub(crate) fn step_servoed(
     scene: &mut Scene,
     ramp: &mut JointRamp,
     target: &[f32],
+    mut before_substep: impl FnMut(&mut Scene) -> std::result::Result<(), SimError>,
     mut after_substep: impl FnMut(&Scene, u32),
 ) -> std::result::Result<(), SimError> {
     let substeps = scene.config().physics.substeps;
@@ -86,6 +87,7 @@ pub(crate) fn step_servoed(
         // Spread the substeps over the ticks (8 over 4: two each).
         let until = substeps * k / ticks;
         while done < until {
+            before_substep(scene)?;
             scene.step_physics()?;
             done += 1;
             after_substep(scene, done);

@@ -3,6 +3,7 @@
 //! arm, the controller's state stream and the user's perception fill the same struct, so the
 //! policy sees the same layout in both worlds.
 
+use fairgrasp_sim::pick::closed_on_object;
 use fairgrasp_sim::rapier3d::na::{Isometry3, Vector3};
 use fairgrasp_sim::scene::Scene;
 
@@ -68,7 +69,7 @@ impl ArmState {
             tcp_linvel: base_inv.rotation * Vector3::from(tcp_v),
             gripper_opening: scene.gripper_opening(),
             gripper_max_opening: scene.max_opening(),
-            gripper_closing: scene.gripper_target() < scene.max_opening() * 0.5,
+            gripper_closing: scene.gripper_commanded_closed(),
             table_z: scene.table_top() as f64 - base_z,
             objects,
         }
@@ -84,12 +85,13 @@ impl ArmState {
         self.objects[i].pose.translation.z - self.objects[i].rest_z
     }
 
-    /// The gripper is commanded closed, both pads touch object `i`, and the fingers are stopped
-    /// by it (opening above 5 mm): it is held.
+    /// Object `i` is held: the gripper is commanded closed, both pads touch it and the fingers
+    /// are stopped by it (the scripted pick's [`closed_on_object`]).
     pub fn grasped(&self, i: usize) -> bool {
-        self.gripper_closing
-            && self.objects[i].pad_contacts[0]
-            && self.objects[i].pad_contacts[1]
-            && self.gripper_opening > 0.005
+        closed_on_object(
+            self.gripper_closing,
+            self.objects[i].pad_contacts,
+            self.gripper_opening,
+        )
     }
 }

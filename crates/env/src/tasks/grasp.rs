@@ -4,14 +4,20 @@
 //! above its resting height and within `success_max_offset` of the TCP, for
 //! `success_hold_steps` consecutive control steps. The object falling off the table ends the
 //! episode as a failure.
+//!
+//! The rule is the simulator's [`SuccessRule`] configured by `[task]`; [`GraspSuccess`] applies
+//! it to an episode's states. Training's [`Task::evaluate`] and the deployment loop (through
+//! [`Task::success_judge`]) run that same type, and the scripted pick judges by
+//! [`GraspSettings::success_rule`].
 
 use crate::arm::{
-    ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
-    TaskSettings,
+    ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings,
+    SuccessJudge, Task, TaskSettings,
 };
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
+use fairgrasp_sim::pick::{GraspStatus, SuccessRule, SuccessTracker};
 use fairgrasp_sim::scene::Scene;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -50,38 +56,79 @@ pub struct GraspSettings {
 
 impl Default for GraspSettings {
     fn default() -> Self {
+        // The rule's figures have one home: the simulator's rule, which the scripted pick
+        // defaults to.
+        let rule = SuccessRule::default();
         Self {
             observation: ObservationPreset::Rich,
             max_episode_steps: 100,
-            success_min_lift: 0.05,
-            success_max_offset: 0.08,
-            success_hold_steps: 10,
+            success_min_lift: rule.min_lift as f32,
+            success_max_offset: rule.max_offset as f32,
+            success_hold_steps: rule.hold_steps,
             render_mode: None,
         }
     }
 }
 
 impl GraspSettings {
-    /// The success conditions on one state: object 0 held by the closed gripper, lifted at
-    /// least `success_min_lift` and within `success_max_offset` of the TCP. Success is these
-    /// holding for `success_hold_steps` consecutive control steps; the deployment loop applies
-    /// the same rule to its estimated states.
-    pub fn holds(&self, state: &ArmState) -> bool {
-        self.holds_for(
-            state.grasped(0),
-            state.lift(0),
-            state.tcp_to_object(0).norm(),
-        )
+    /// The success rule these settings configure: what training, the twin, the deployment loop
+    /// and the scripted pick judge a grasp by.
+    pub fn success_rule(&self) -> SuccessRule {
+        SuccessRule {
+            min_lift: self.success_min_lift as f64,
+            max_offset: self.success_max_offset as f64,
+            hold_steps: self.success_hold_steps,
+        }
     }
 
-    /// [`Self::holds`] on the values already read from a state (object 0 grasped, its lift
-    /// and its distance from the TCP, m).
-    fn holds_for(&self, grasped: bool, lift: f64, distance: f64) -> bool {
-        grasped && lift > self.success_min_lift as f64 && distance < self.success_max_offset as f64
+    /// The success conditions on one state: object 0 held by the closed gripper, lifted at
+    /// least `success_min_lift` and within `success_max_offset` of the TCP. Success is these
+    /// holding for `success_hold_steps` consecutive control steps ([`GraspSuccess`]).
+    pub fn holds(&self, state: &ArmState) -> bool {
+        grasp_status(state).satisfies(&self.success_rule())
+    }
+}
+
+/// What the grasp rule reads of a state: object 0 held, its lift and its distance from the TCP.
+pub fn grasp_status(state: &ArmState) -> GraspStatus {
+    GraspStatus {
+        closed_on_object: state.grasped(0),
+        lift: state.lift(0),
+        offset: state.tcp_to_object(0).norm(),
+    }
+}
+
+/// The grasp task's success rule over one episode's states: [`GraspSettings::holds`] counted
+/// over consecutive control steps until `success_hold_steps`.
+#[derive(Clone, Debug)]
+pub struct GraspSuccess(SuccessTracker);
+
+impl GraspSuccess {
+    /// A judge for a new episode.
+    pub fn new(settings: &GraspSettings) -> Self {
+        Self(SuccessTracker::new(settings.success_rule()))
+    }
+
+    /// Feeds one control step's reading; true once the rule has held for its hold steps.
+    pub fn update_status(&mut self, status: &GraspStatus) -> bool {
+        self.0.update(status)
+    }
+
+    /// Consecutive control steps the conditions have held.
+    pub fn streak(&self) -> u32 {
+        self.0.consecutive()
+    }
+}
+
+impl SuccessJudge for GraspSuccess {
+    fn update(&mut self, state: &ArmState) -> bool {
+        self.update_status(&grasp_status(state))
     }
 }
 
 impl TaskSettings for GraspSettings {
+    type Task = Grasp;
+
     fn max_episode_steps(&self) -> u32 {
         self.max_episode_steps
     }
@@ -176,24 +223,12 @@ pub type GraspConfig = ArmEnvConfig<GraspSettings, GraspReward>;
 /// The grasp environment.
 pub type GraspEnv = ArmEnv<Grasp>;
 
-/// Counts consecutive control steps that satisfy a condition.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Streak(pub u32);
-
-impl Streak {
-    /// Feeds one step; returns the new count.
-    pub fn update(&mut self, holds: bool) -> u32 {
-        self.0 = if holds { self.0 + 1 } else { 0 };
-        self.0
-    }
-}
-
 /// The grasp task (object 0 is the one to lift; any others are obstacles).
 pub struct Grasp {
     settings: GraspSettings,
     reward: GraspReward,
     random_shapes: bool,
-    streak: Streak,
+    success: GraspSuccess,
     previous_distance: f32,
     grasp_paid: bool,
 }
@@ -258,7 +293,7 @@ impl Task for Grasp {
             settings: config.task.clone(),
             reward: config.reward.clone(),
             random_shapes: config.shapes.enabled,
-            streak: Streak::default(),
+            success: GraspSuccess::new(&config.task),
             previous_distance: 0.0,
             grasp_paid: false,
         })
@@ -266,7 +301,7 @@ impl Task for Grasp {
 
     fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()> {
         scene.place_objects_at_random(rng)?;
-        self.streak = Streak::default();
+        self.success = GraspSuccess::new(&self.settings);
         self.grasp_paid = false;
         let tcp = scene.tcp_pose().translation.vector;
         self.previous_distance =
@@ -307,23 +342,23 @@ impl Task for Grasp {
     }
 
     fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation {
-        let grasped = state.grasped(0);
-        let lift = state.lift(0);
-        let distance = state.tcp_to_object(0).norm();
-        let streak = self
-            .streak
-            .update(self.settings.holds_for(grasped, lift, distance));
+        let status = grasp_status(state);
+        let success = self.success.update_status(&status);
         Evaluation {
-            success: streak >= self.settings.success_hold_steps,
+            success,
             failure: scene
                 .object_off_table(0)
                 .then_some(EpisodeEvent::ObjectOffTable),
             extras: NamedValues::new()
-                .with("grasped", grasped as u8 as f32)
-                .with("lift", lift as f32)
-                .with("ee_object_distance", distance as f32)
-                .with("success_streak", streak as f32),
+                .with("grasped", status.closed_on_object as u8 as f32)
+                .with("lift", status.lift as f32)
+                .with("ee_object_distance", status.offset as f32)
+                .with("success_streak", self.success.streak() as f32),
         }
+    }
+
+    fn success_judge(&self) -> Option<Box<dyn SuccessJudge>> {
+        Some(Box::new(GraspSuccess::new(&self.settings)))
     }
 
     fn reward(&mut self, e: &Evaluation, state: &ArmState, steps_left: u32) -> NamedValues {

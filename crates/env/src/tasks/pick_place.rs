@@ -10,7 +10,7 @@ use crate::arm::{
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
-use crate::tasks::grasp::{Streak, rich_observation};
+use crate::tasks::grasp::rich_observation;
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::Scene;
 use rand::Rng;
@@ -50,6 +50,8 @@ impl Default for PickPlaceSettings {
 }
 
 impl TaskSettings for PickPlaceSettings {
+    type Task = PickPlace;
+
     fn max_episode_steps(&self) -> u32 {
         self.max_episode_steps
     }
@@ -113,6 +115,18 @@ impl RewardSettings for PickPlaceReward {
 
 pub type PickPlaceConfig = ArmEnvConfig<PickPlaceSettings, PickPlaceReward>;
 pub type PickPlaceEnv = ArmEnv<PickPlace>;
+
+/// Counts consecutive control steps that satisfy a condition.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Streak(pub u32);
+
+impl Streak {
+    /// Feeds one step; returns the new count.
+    pub fn update(&mut self, holds: bool) -> u32 {
+        self.0 = if holds { self.0 + 1 } else { 0 };
+        self.0
+    }
+}
 
 /// The pick-and-place task (object 0; any others are obstacles).
 pub struct PickPlace {

@@ -96,6 +96,8 @@ impl Default for SortSettings {
 }
 
 impl TaskSettings for SortSettings {
+    type Task = Sort;
+
     fn max_episode_steps(&self) -> u32 {
         self.max_episode_steps
     }

@@ -165,16 +165,46 @@ impl JointRamp {
     /// The set point that brakes every joint as hard as allowed along its present motion.
     pub fn propose_brake(&self) -> Option<Vec<f64>> {
         let last = self.last.as_ref()?;
+        Some(self.brake_once(last, &self.velocity).0)
+    }
+
+    /// One period of braking every joint as hard as allowed from `position` moving at
+    /// `velocity`: the next position and velocity.
+    fn brake_once(&self, position: &[f64], velocity: &[f64]) -> (Vec<f64>, Vec<f64>) {
         let (dt, acc) = (self.dt, self.acc);
-        Some(
-            (0..self.dof())
-                .map(|i| {
-                    let v = self.velocity[i];
-                    let braked = v - v.signum() * (acc * dt).min(v.abs());
-                    (last[i] + braked * dt).clamp(self.lower[i], self.upper[i])
-                })
-                .collect(),
-        )
+        (0..self.dof())
+            .map(|i| {
+                let v = velocity[i];
+                let braked = v - v.signum() * (acc * dt).min(v.abs());
+                let p = (position[i] + braked * dt).clamp(self.lower[i], self.upper[i]);
+                (p, braked)
+            })
+            .unzip()
+    }
+
+    /// The set points braking would send after `step` (reached from the last set point) until
+    /// every joint stops: the first, the last, and at most `samples` evenly spaced between.
+    /// Joints brake independently, so the path bends away from the straight line to
+    /// [`stopping_point`](Self::stopping_point): checking only where braking ends let the TCP
+    /// dip below the workspace floor on the way.
+    pub fn braking_path(&self, step: &[f64], samples: usize) -> Option<Vec<Vec<f64>>> {
+        let last = self.last.as_ref()?;
+        let mut velocity: Vec<f64> = (step.iter().zip(last))
+            .map(|(s, l)| (s - l) / self.dt)
+            .collect();
+        let periods = (velocity.iter())
+            .map(|v| (v.abs() / (self.acc * self.dt)).ceil())
+            .fold(0.0, f64::max) as usize;
+        let stride = periods.div_ceil(samples.max(1)).max(1);
+        let mut position = step.to_vec();
+        let mut path = Vec::new();
+        for k in 1..=periods {
+            (position, velocity) = self.brake_once(&position, &velocity);
+            if k == 1 || k % stride == 0 || k == periods {
+                path.push(position.clone());
+            }
+        }
+        Some(path)
     }
 
     /// Where braking at the cap from `step`, reached from the last set point, would stop.

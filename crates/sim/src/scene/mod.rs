@@ -623,6 +623,11 @@ impl Scene {
         2.0 * self.robot.position_targets()[self.finger]
     }
 
+    /// Whether the fingers are commanded closed (their target below half the stroke).
+    pub fn gripper_commanded_closed(&self) -> bool {
+        self.gripper_target() < self.max_opening() * 0.5
+    }
+
     fn set_gripper_opening_now(&mut self, opening: f32) -> Result<()> {
         let mut q = self
             .robot
