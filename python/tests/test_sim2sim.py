@@ -100,6 +100,23 @@ def test_bad_readings_and_models_raise_clear_errors(tmp_path, trained_model):
         fairgrasp.PolicyDriver(broken)
 
 
+def test_the_gripper_ramp_moves_as_the_twin_s_gripper_does():
+    """`fairgrasp.GripperRamp` is the Rust model the twin and `[control.gripper]` use: a move
+    leaves from the fingers at its speed and stops at its target; bad numbers are refused."""
+    ramp = fairgrasp.GripperRamp(100.0)
+    assert ramp.full_speed_percent_per_s == 1500.0
+    ramp.command(100.0, 0.0, 375.0)
+    assert ramp.target == 0.0
+    assert ramp.advance(0.1) == pytest.approx(62.5)
+    assert ramp.advance(1.0) == 0.0
+    ramp.command(40.0, 100.0, 1500.0)
+    assert ramp.advance(0.02) == pytest.approx(70.0)
+    with pytest.raises(ValueError, match="dt"):
+        ramp.advance(float("nan"))
+    with pytest.raises(ValueError, match="fingers_percent"):
+        ramp.command(float("inf"), 0.0, 100.0)
+
+
 @pytest.mark.skipif(importlib.util.find_spec("mujoco") is None, reason="mujoco is not installed")
 def test_bench_sim2sim_runs_episodes_in_mujoco(tmp_path, trained_model):
     out = tmp_path / "sim2sim.json"

@@ -23,6 +23,9 @@ pad friction are fairgrasp's figures):
   exact; `--opening left` reads it fairgrasp's way),
   and the cube's pose in the base frame as a perception feed gives it (the current pose; the
   deployment's 30 Hz feed can be up to one period old).
+- **The gripper** moves as a FAIRINO MoveGripper moves it on the twin: when the policy's
+  command changes, a set point from where the fingers are at full speed (1500 % of the stroke
+  per second), advanced every physics step (`fairgrasp.GripperRamp`, the twin's own model).
 - **Episodes** start as fairgrasp's do: the arm at the model's home pose with the gripper open,
   the cube dropped from 1 mm above its resting height at the pose `fairgrasp eval` draws for the
   same seed (`PolicyDriver.placement`), then settled by the same rule as fairgrasp's scene
