@@ -33,7 +33,7 @@
 //! - **Gripper**: `ActGripper(index 1…8, 1)` activates, `(…, 0)` resets; `MoveGripper` before
 //!   activation → 73; position, speed and force in 0…100 % (else 4); `maxtime` 0…30000 ms (0:
 //!   30 s). The set point moves at the speed % of the simulated fingers' own speed
-//!   ([`super::gripper::FULL_SPEED_PERCENT_PER_S`]); force is accepted and not modelled (the
+//!   ([`fairgrasp_sim::control::FINGERS_FULL_SPEED_PERCENT_PER_S`]); force is accepted and not modelled (the
 //!   simulated fingers have their own).
 //!   Motion done on arrival, on a stall (an object between the fingers) or after `maxtime`.
 //! - **Kinematics**: the simulator's chain from the arm base to the gripper's centre point (the

@@ -10,17 +10,12 @@ const ARRIVED_PERCENT: f64 = 1.0;
 /// Movement smaller than this (%) over [`STALL_SECONDS`] is a stall (fingers on an object).
 const PROGRESS_PERCENT: f64 = 0.3;
 const STALL_SECONDS: f64 = 0.15;
-/// The set point's speed at 100 % (% of the stroke per second): the simulated fingers' own, so
-/// at `s` % a move takes 100/`s` times as long, as the deployment's speed scale slows the arm.
-pub const FULL_SPEED_PERCENT_PER_S: f64 = FINGERS_FULL_SPEED_PERCENT_PER_S;
 
 /// The gripper state machine.
 #[derive(Clone, Debug)]
 pub struct Gripper {
     pub active: bool,
-    /// Commanded position (%).
-    pub target: f64,
-    /// Where the fingers are sent now.
+    /// Where the fingers are sent now, and the commanded position.
     ramp: GripperRamp,
     /// When the ramp was last advanced (s).
     ramped_at: f64,
@@ -40,7 +35,6 @@ impl Gripper {
     pub fn new(active: bool) -> Self {
         Self {
             active,
-            target: 100.0,
             ramp: GripperRamp::at(100.0),
             ramped_at: 0.0,
             position: 100.0,
@@ -55,11 +49,12 @@ impl Gripper {
     /// Starts a move to `percent` (0…100) at `speed_percent` (1…100) of the full speed that
     /// gives up after `max_time` s; returns its number.
     pub fn command(&mut self, now: f64, percent: f64, speed_percent: f64, max_time: f64) -> u64 {
-        self.target = percent.clamp(0.0, 100.0);
-        let speed = speed_percent.clamp(1.0, 100.0) / 100.0 * FULL_SPEED_PERCENT_PER_S;
-        self.ramp.command(self.position, self.target, speed);
+        // At `s` % of full speed (the simulated fingers' own) a move takes 100/`s` times as
+        // long, as the deployment's speed scale slows the arm.
+        let speed = speed_percent.clamp(1.0, 100.0) / 100.0 * FINGERS_FULL_SPEED_PERCENT_PER_S;
+        self.ramp.command(self.position, percent, speed);
         self.ramped_at = now;
-        self.done = (self.position - self.target).abs() < ARRIVED_PERCENT;
+        self.done = (self.position - self.ramp.target()).abs() < ARRIVED_PERCENT;
         self.commanded_at = now;
         self.max_time = max_time;
         self.progress = (now, self.position);
@@ -83,7 +78,7 @@ impl Gripper {
         if (position - self.progress.1).abs() > PROGRESS_PERCENT {
             self.progress = (now, position);
         }
-        let arrived = (position - self.target).abs() < ARRIVED_PERCENT;
+        let arrived = (position - self.ramp.target()).abs() < ARRIVED_PERCENT;
         let stalled = now - self.progress.0 > STALL_SECONDS;
         let timed_out = now - self.commanded_at > self.max_time;
         self.done = arrived || stalled || timed_out;
@@ -92,7 +87,6 @@ impl Gripper {
     /// Sets the target to where the fingers are (a reset of the world put them there).
     pub fn hold_at(&mut self, position: f64) {
         self.position = position;
-        self.target = position;
         self.ramp = GripperRamp::at(position);
         self.done = true;
     }

@@ -80,13 +80,6 @@ impl GraspSettings {
             hold_steps: self.success_hold_steps,
         }
     }
-
-    /// The success conditions on one state: object 0 held by the closed gripper, lifted at
-    /// least `success_min_lift` and within `success_max_offset` of the TCP. Success is these
-    /// holding for `success_hold_steps` consecutive control steps ([`GraspSuccess`]).
-    pub fn holds(&self, state: &ArmState) -> bool {
-        grasp_status(state).satisfies(&self.success_rule())
-    }
 }
 
 /// What the grasp rule reads of a state: object 0 held, its lift and its distance from the TCP.
