@@ -304,6 +304,13 @@ impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
         self.randomization.validate()?;
         self.shapes.validate()?;
         self.readings.validate()?;
+        if !self.readings.enabled && self.control.speed_scales.iter().any(|&s| s != 1.0) {
+            return Err(EnvError::config(
+                "control.speed_scales",
+                "scales below 1 need readings.enabled = true (the observation reads speeds in \
+                 the policy's time only through the controller's readings)",
+            ));
+        }
         Camera::new(self.render.clone())?;
         Ok(())
     }

@@ -50,6 +50,14 @@ pub struct ControlConfig {
     /// The gripper's controller: the fingers move through its set point
     /// ([`crate::arm::gripper`]).
     pub gripper: GripperConfig,
+    /// The deployment's speed scales the policy will run at, one drawn per episode (no draw
+    /// for one value). At scale s a control step lasts its period over s of simulated time
+    /// (physics substeps ÷ s) with the servo caps, the gripper's speed and the reported speeds
+    /// scaled as the deployment scales them: the arm's motion is the same in the policy's time,
+    /// while the drives' lag, the fingers' force and the object's inertia act in the
+    /// simulator's, as on the arm. Physics costs the mean of 1/s. Below 1 it needs
+    /// `[readings]`, which reads speeds in the policy's time.
+    pub speed_scales: Vec<f32>,
 }
 
 impl Default for ControlConfig {
@@ -66,6 +74,7 @@ impl Default for ControlConfig {
             workspace_max: [0.85, 0.35, 0.45],
             servo: ServoConfig::default(),
             gripper: GripperConfig::default(),
+            speed_scales: vec![1.0],
         }
     }
 }
@@ -87,6 +96,22 @@ impl ControlConfig {
         positive("control.max_yaw_delta", self.max_yaw_delta, 0.5)?;
         positive("control.lead_steps", self.lead_steps, 20.0)?;
         self.gripper.validate()?;
+        let scales = &self.speed_scales;
+        if scales.is_empty() || scales.len() > 16 {
+            return Err(EnvError::config(
+                "control.speed_scales",
+                format!("must list 1 to 16 scales, got {}", scales.len()),
+            ));
+        }
+        for &v in scales {
+            positive("control.speed_scales", v, 1.0)?;
+            if v < 0.05 {
+                return Err(EnvError::config(
+                    "control.speed_scales",
+                    format!("each scale must be at least 0.05 (physics ÷ 20), got {v}"),
+                ));
+            }
+        }
         positive("control.servo.period_ms", self.servo.period_ms, 100.0)?;
         positive(
             "control.servo.max_joint_speed_deg_s",

@@ -47,8 +47,14 @@ impl GripperConfig {
     }
 
     /// This episode's gripper, when enabled: at rest at the fingers' present target, its speed
-    /// drawn from the range (no draw when the range is one value).
-    pub fn drive(&self, scene: &Scene, rng: &mut impl Rng) -> Option<GripperDrive> {
+    /// drawn from the range (no draw when the range is one value) and, as the deployment
+    /// commands it, times the speed scale in the simulator's time.
+    pub fn drive(
+        &self,
+        scene: &Scene,
+        speed_scale: f32,
+        rng: &mut impl Rng,
+    ) -> Option<GripperDrive> {
         if !self.enabled {
             return None;
         }
@@ -61,7 +67,7 @@ impl GripperConfig {
         let max = scene.max_opening() as f64;
         Some(GripperDrive {
             ramp: GripperRamp::at(scene.gripper_target() as f64 / max * 100.0),
-            speed,
+            speed: speed * speed_scale as f64,
         })
     }
 }
@@ -70,6 +76,7 @@ impl GripperConfig {
 #[derive(Clone, Debug, PartialEq)]
 pub struct GripperDrive {
     ramp: GripperRamp,
+    /// % of the stroke per second of simulated time.
     speed: f64,
 }
 

@@ -124,6 +124,10 @@ struct Episode {
     ramp: Option<JointRamp>,
     /// The gripper's set point, when `[control.gripper]` is on.
     gripper: Option<GripperDrive>,
+    /// This episode's speed scale (`control.speed_scales`) and the physics substeps of one
+    /// control step at it.
+    speed_scale: f32,
+    substeps: u32,
     /// With `[readings]`: the estimator and the state it built from this step's readings,
     /// which the policy and the action mapping see.
     estimator: Option<StateEstimator>,
@@ -421,8 +425,10 @@ impl<T: Task> ArmEnv<T> {
     }
 
     /// The state the policy sees with `[readings]`: the reported state read as a controller
-    /// reports it, the object's pose from a feed of the configured rate (drawn age), through
-    /// the estimator. `before` is object 0's true pose one control step earlier.
+    /// reports it (speeds in the policy's time at `speed_scale`), the object's pose from a feed
+    /// of the configured rate (drawn age), through the estimator. `before` is object 0's true
+    /// pose one control step earlier; `dt` is the control period in the policy's time (0 at
+    /// reset).
     fn estimate(
         &mut self,
         estimator: &mut StateEstimator,
@@ -430,18 +436,21 @@ impl<T: Task> ArmEnv<T> {
         before: &Isometry3<f64>,
         gripper_closing: bool,
         dt: f64,
+        speed_scale: f32,
     ) -> ArmState {
+        let qd: Vec<f32> = view.qd.iter().map(|v| v / speed_scale).collect();
         let reading = ControllerReading::synthesize(
             &view.q,
-            &view.qd,
+            &qd,
             view.gripper_opening,
             view.gripper_max_opening,
         );
         let max_age = self.config.readings.max_object_age();
         let now = view.objects[0].pose;
         let pose = if max_age > 0.0 && dt > 0.0 {
+            // The feed runs in the simulator's time, where the step lasts dt / speed_scale.
             let age = max_age * self.rng.random::<f64>();
-            readings::aged_pose(before, &now, age, dt)
+            readings::aged_pose(before, &now, age, dt / speed_scale as f64)
         } else {
             now
         };
@@ -538,6 +547,16 @@ impl<T: Task> Env for ArmEnv<T> {
             self.rng = ChaCha8Rng::seed_from_u64(seed);
         }
         let (latency, mut params) = self.randomize()?;
+        let speed_scale = match self.config.control.speed_scales.as_slice() {
+            [one] => *one,
+            scales => scales[self.rng.random_range(0..scales.len())],
+        };
+        if self.config.control.speed_scales.len() > 1 {
+            params.set("param/speed_scale", speed_scale);
+        }
+        let substeps = ((self.scene.config().physics.substeps as f32 / speed_scale).round()
+            as u32)
+            .max(1);
         self.task
             .initialize_episode(&mut self.scene, &mut self.rng)?;
         // Drawn after the placement, so that offsets leave the episode's layout unchanged.
@@ -550,7 +569,7 @@ impl<T: Task> Env for ArmEnv<T> {
             let mut e = StateEstimator::new();
             let view = reported.as_ref().unwrap_or(&state);
             let pose = state.objects[0].pose;
-            observed = Some(self.estimate(&mut e, view, &pose, false, 0.0));
+            observed = Some(self.estimate(&mut e, view, &pose, false, 0.0, speed_scale));
             estimator = Some(e);
         }
         let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
@@ -562,12 +581,9 @@ impl<T: Task> Env for ArmEnv<T> {
         let previous_action = vec![0.0; self.action_space.dim()];
         let obs = self.observe(view, &previous_action);
         let no_op = self.no_op_action();
-        let ramp = self.config.control.servo.ramp(&self.scene);
-        let gripper = self
-            .config
-            .control
-            .gripper
-            .drive(&self.scene, &mut self.rng);
+        let ramp = self.config.control.servo.ramp(&self.scene, speed_scale);
+        let gripper =
+            (self.config.control.gripper).drive(&self.scene, speed_scale, &mut self.rng);
         self.episode = Some(Episode {
             steps: 0,
             done: false,
@@ -579,6 +595,8 @@ impl<T: Task> Env for ArmEnv<T> {
             last_obs: obs.clone(),
             ramp,
             gripper,
+            speed_scale,
+            substeps,
             estimator,
             observed,
         });
@@ -632,7 +650,7 @@ impl<T: Task> Env for ArmEnv<T> {
             Some(g) => g.command(&self.scene, episode.command.gripper_open),
         }
         // With `[readings]`, the readings may be this many substeps older than the step's end.
-        let substeps = self.scene.config().physics.substeps;
+        let (substeps, speed_scale) = (episode.substeps, episode.speed_scale);
         let age = match &self.config.readings {
             r if r.enabled && r.state_age_ms[1] > 0.0 => {
                 let ms = uniform(&mut self.rng, r.state_age_ms);
@@ -662,7 +680,8 @@ impl<T: Task> Env for ArmEnv<T> {
                 self.scene.check_finite()
             }),
             Some(ramp) => {
-                servo::step_servoed(&mut self.scene, ramp, &physical, drive_gripper, read_early)
+                let (scene, target) = (&mut self.scene, &physical);
+                servo::step_servoed(scene, ramp, substeps, target, drive_gripper, read_early)
             }
         };
         match stepped {
@@ -689,7 +708,7 @@ impl<T: Task> Env for ArmEnv<T> {
                 });
                 let view = (early.as_ref()).or(reported.as_ref()).unwrap_or(&state);
                 let dt = self.scene.control_period() as f64;
-                Some(self.estimate(e, view, &before, closing, dt))
+                Some(self.estimate(e, view, &before, closing, dt, speed_scale))
             }
             _ => None,
         };

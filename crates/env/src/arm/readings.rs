@@ -25,13 +25,15 @@ pub struct ReadingsConfig {
     /// Off: the observation is read from the simulator's true state (the default, and how
     /// every model before this option was trained).
     pub enabled: bool,
-    /// The object pose feed's rate (Hz). Each control step sees the pose as it was a uniformly
-    /// drawn age of up to one feed period earlier; 0 shows the current pose.
+    /// The object pose feed's rate (Hz, the simulator's time). Each control step sees the pose
+    /// as it was a uniformly drawn age of up to one feed period earlier; 0 shows the current
+    /// pose.
     pub object_feed_hz: f32,
     /// How old the controller's readings are when the policy acts, drawn each control step
-    /// (ms, uniform, rounded to physics substeps): the state stream's period, the reply
-    /// latency before a set point acts, and the drives' own delay, all in the policy's time.
-    /// `[0, 0]`: read at the step's end.
+    /// (ms of the simulator's time, uniform, rounded to physics substeps, less than one
+    /// control step): the state stream's period, the reply latency before a set point acts,
+    /// and the drives' own delay. At speed scale s they are s times as long in the policy's
+    /// time, as on the arm. `[0, 0]`: read at the step's end.
     pub state_age_ms: [f32; 2],
 }
 

@@ -37,20 +37,24 @@ impl Default for ServoConfig {
 
 impl ServoConfig {
     /// A ramp for `scene`'s arm started at its present targets, when enabled: a set point every
-    /// servo period of the control step, the caps in radians.
-    pub fn ramp(&self, scene: &Scene) -> Option<JointRamp> {
+    /// servo period of the control step, the caps in radians. At `speed_scale` s the control
+    /// step lasts its period over s and the caps are the deployment's: speed × s, acceleration
+    /// × s² (the same motion in the policy's time).
+    pub fn ramp(&self, scene: &Scene, speed_scale: f32) -> Option<JointRamp> {
         if !self.enabled {
             return None;
         }
-        let ticks = servo_ticks(scene.control_period(), self.period_ms);
+        let period = scene.control_period() / speed_scale;
+        let ticks = servo_ticks(period, self.period_ms);
         let limits: Vec<(f64, f64)> = (scene.arm_limits().iter())
             .map(|&(lo, hi)| (lo as f64, hi as f64))
             .collect();
+        let s = speed_scale as f64;
         let mut ramp = JointRamp::new(
             &limits,
-            (self.max_joint_speed_deg_s as f64).to_radians(),
-            (self.max_joint_acc_deg_s2 as f64).to_radians(),
-            scene.control_period() as f64 / ticks as f64,
+            (self.max_joint_speed_deg_s as f64).to_radians() * s,
+            (self.max_joint_acc_deg_s2 as f64).to_radians() * s * s,
+            period as f64 / ticks as f64,
         );
         let start: Vec<f64> = scene.arm_targets().iter().map(|&v| v as f64).collect();
         ramp.start(&start);
@@ -64,18 +68,20 @@ pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
     ((control_period * 1000.0 / period_ms).round() as u32).max(1)
 }
 
-/// One control step through the servo ramp: a set point every servo period, each held by the
-/// drives for that period's share of the physics substeps. `before_substep` may drive the scene
-/// before each physics substep; `after_substep` sees it after, with the count done.
+/// One control step of `substeps` physics steps through the servo ramp: a set point every
+/// servo period, each held by the drives for that period's share of the substeps.
+/// `before_substep` may drive the scene before each physics substep; `after_substep` sees it
+/// after, with the count done.
 pub(crate) fn step_servoed(
     scene: &mut Scene,
     ramp: &mut JointRamp,
+    substeps: u32,
     target: &[f32],
     mut before_substep: impl FnMut(&mut Scene) -> std::result::Result<(), SimError>,
     mut after_substep: impl FnMut(&Scene, u32),
 ) -> std::result::Result<(), SimError> {
-    let substeps = scene.config().physics.substeps;
-    let ticks = servo_ticks(scene.control_period(), ramp.caps().2 as f32 * 1000.0)
+    let period = scene.dt() * substeps as f32;
+    let ticks = servo_ticks(period, ramp.caps().2 as f32 * 1000.0)
         .min(substeps)
         .max(1);
     let target: Vec<f64> = target.iter().map(|&v| v as f64).collect();
