@@ -201,6 +201,7 @@ impl Deployment {
     pub fn mismatches(&self) -> Vec<String> {
         [
             self.motion_mismatch(),
+            self.io.speed_scale_mismatch(&self.options.safety),
             self.io.gripper_mismatch(),
             self.observation_mismatch(),
         ]
