@@ -554,9 +554,8 @@ impl<T: Task> Env for ArmEnv<T> {
         if self.config.control.speed_scales.len() > 1 {
             params.set("param/speed_scale", speed_scale);
         }
-        let substeps = ((self.scene.config().physics.substeps as f32 / speed_scale).round()
-            as u32)
-            .max(1);
+        let substeps =
+            ((self.scene.config().physics.substeps as f32 / speed_scale).round() as u32).max(1);
         self.task
             .initialize_episode(&mut self.scene, &mut self.rng)?;
         // Drawn after the placement, so that offsets leave the episode's layout unchanged.
@@ -582,8 +581,7 @@ impl<T: Task> Env for ArmEnv<T> {
         let obs = self.observe(view, &previous_action);
         let no_op = self.no_op_action();
         let ramp = self.config.control.servo.ramp(&self.scene, speed_scale);
-        let gripper =
-            (self.config.control.gripper).drive(&self.scene, speed_scale, &mut self.rng);
+        let gripper = (self.config.control.gripper).drive(&self.scene, speed_scale, &mut self.rng);
         self.episode = Some(Episode {
             steps: 0,
             done: false,
