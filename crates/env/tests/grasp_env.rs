@@ -8,29 +8,13 @@ use fairgrasp_env::tasks::grasp::{GraspConfig as EnvConfig, ObservationPreset, R
 use fairgrasp_env::{Env, EnvError, GraspEnv};
 use rand::SeedableRng;
 
+mod common;
+use common::scripted_episode;
+
 fn env_with(mutate: impl FnOnce(&mut EnvConfig)) -> GraspEnv {
     let mut config = EnvConfig::default();
     mutate(&mut config);
     GraspEnv::new(config).expect("env builds")
-}
-
-/// Runs the scripted policy for one episode; returns (success, steps, return).
-fn scripted_episode(env: &mut GraspEnv, seed: u64) -> (bool, u32, f32) {
-    env.reset(Some(seed)).unwrap();
-    let mut policy = ScriptedGraspPolicy::new(env);
-    let mut total = 0.0;
-    loop {
-        let action = policy.act(env);
-        assert!(
-            env.action_space().contains(&action),
-            "scripted action outside the space"
-        );
-        let step = env.step(&action).unwrap();
-        total += step.reward;
-        if step.terminated || step.truncated {
-            return (step.info.success, step.info.elapsed_steps, total);
-        }
-    }
 }
 
 #[test]

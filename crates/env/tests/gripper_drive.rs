@@ -2,9 +2,11 @@
 //! `MoveGripper` moves them on the arm, instead of jumping their target.
 
 use fairgrasp_env::arm::ActionMode;
-use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::tasks::grasp::GraspConfig;
 use fairgrasp_env::{Env, GraspEnv};
+
+mod common;
+use common::scripted_successes;
 
 fn env_with(gripper: Option<[f32; 2]>) -> GraspEnv {
     let mut config = GraspConfig::default();
@@ -45,19 +47,7 @@ fn the_fingers_follow_the_gripper_s_set_point_at_its_speed() {
 
 #[test]
 fn a_ramped_gripper_still_grasps_and_bad_speeds_name_their_key() {
-    let mut env = env_with(Some([1200.0, 1800.0]));
-    let mut successes = 0;
-    for seed in 0..5 {
-        env.reset(Some(seed)).unwrap();
-        let mut policy = ScriptedGraspPolicy::new(&env);
-        loop {
-            let step = env.step(&policy.act(&env)).unwrap();
-            if step.terminated || step.truncated {
-                successes += step.info.success as u32;
-                break;
-            }
-        }
-    }
+    let successes = scripted_successes(&mut env_with(Some([1200.0, 1800.0])), 0..5);
     assert!(successes >= 4, "{successes} of 5");
     for bad in [[0.0, 10.0], [20.0, 10.0], [f32::NAN, 1.0]] {
         let mut config = GraspConfig::default();

@@ -3,9 +3,11 @@
 //! arm.
 
 use fairgrasp_env::arm::ActionMode;
-use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::tasks::grasp::GraspConfig;
 use fairgrasp_env::{Env, GraspEnv};
+
+mod common;
+use common::scripted_successes;
 
 fn env_at(scales: &[f32]) -> GraspEnv {
     let mut config = GraspConfig::default();
@@ -75,19 +77,7 @@ fn a_quarter_scale_takes_four_times_the_simulated_time_for_the_same_motion() {
 
 #[test]
 fn a_scripted_grasp_succeeds_at_a_quarter_scale() {
-    let mut env = env_at(&[0.25]);
-    let mut successes = 0;
-    for seed in 0..4 {
-        env.reset(Some(seed)).unwrap();
-        let mut policy = ScriptedGraspPolicy::new(&env);
-        loop {
-            let step = env.step(&policy.act(&env)).unwrap();
-            if step.terminated || step.truncated {
-                successes += step.info.success as u32;
-                break;
-            }
-        }
-    }
+    let successes = scripted_successes(&mut env_at(&[0.25]), 0..4);
     assert!(successes >= 3, "{successes} of 4");
 }
 

@@ -549,11 +549,12 @@ impl<T: Task> Env for ArmEnv<T> {
         let (latency, mut params) = self.randomize()?;
         let speed_scale = match self.config.control.speed_scales.as_slice() {
             [one] => *one,
-            scales => scales[self.rng.random_range(0..scales.len())],
+            scales => {
+                let drawn = scales[self.rng.random_range(0..scales.len())];
+                params.set("param/speed_scale", drawn);
+                drawn
+            }
         };
-        if self.config.control.speed_scales.len() > 1 {
-            params.set("param/speed_scale", speed_scale);
-        }
         let substeps =
             ((self.scene.config().physics.substeps as f32 / speed_scale).round() as u32).max(1);
         self.task
