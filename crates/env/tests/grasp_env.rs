@@ -369,6 +369,66 @@ fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages()
 }
 
 #[test]
+fn a_gripper_switch_costs_its_weight_and_nothing_is_reported_at_the_default() {
+    let commands = [1.0, 1.0, -1.0, -1.0, 1.0, -1.0];
+    let run = |weight: f32| {
+        let mut env = env_with(|c| {
+            c.reward.kind = RewardKind::Staged;
+            c.reward.gripper_switch = weight;
+        });
+        env.reset(Some(4)).unwrap();
+        let zero = vec![0.0; env.action_space().dim() - 1];
+        (commands.iter())
+            .map(|&g| {
+                let action: Vec<f32> = zero.iter().copied().chain([g]).collect();
+                env.step(&action)
+                    .unwrap()
+                    .info
+                    .reward_terms
+                    .get("gripper_switch")
+            })
+            .collect::<Vec<_>>()
+    };
+    // The episode starts open: the first close and every change after it cost the weight.
+    let w = 0.25;
+    assert_eq!(run(w), [0.0, 0.0, -w, 0.0, -w, -w].map(Some).to_vec());
+    assert!(run(0.0).iter().all(Option::is_none));
+}
+
+#[test]
+fn the_alignment_term_grows_with_the_folded_yaw_near_the_object() {
+    let weight = 0.5;
+    let mut env = env_with(|c| {
+        c.reward.kind = RewardKind::Staged;
+        c.reward.align = weight;
+        c.control.action_mode = ActionMode::Cartesian;
+    });
+    let quarter = std::f64::consts::FRAC_PI_4;
+    let mut seen = Vec::new();
+    for seed in 0..12 {
+        env.reset(Some(seed)).unwrap();
+        let step = env.step(&[0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
+        let s = env.state().unwrap();
+        let yaw = s.objects[0].pose.rotation.euler_angles().2 - s.tcp.rotation.euler_angles().2;
+        let folded = (yaw + quarter).rem_euclid(2.0 * quarter) - quarter;
+        let d = s.tcp_to_object(0).norm() as f32;
+        let expected = -weight * (folded.abs() / quarter) as f32 * (1.0 - (4.0 * d).tanh());
+        let got = step.info.reward_terms.value("align");
+        assert!(
+            (got - expected).abs() < 1e-5,
+            "seed {seed}: {got} vs {expected}"
+        );
+        assert!(got <= 0.0 && got >= -weight);
+        seen.push(folded.abs());
+    }
+    // The placements' yaws spread over the folded range: the term is not a constant.
+    let (lo, hi) = seen
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(l, h), &v| (l.min(v), h.max(v)));
+    assert!(lo < 0.2 && hi > 0.5, "folded yaws {seen:?}");
+}
+
+#[test]
 fn random_shapes_draw_boxes_and_cylinders_in_range_and_show_their_size() {
     use fairgrasp_env::sim::scene::ObjectShape;
     let mut env = env_with(|c| c.shapes.enabled = true);

@@ -176,6 +176,16 @@ pub struct GraspReward {
     pub off_table_penalty: f32,
     /// Paid on success (sparse and staged kinds).
     pub success: f32,
+    /// Subtracted each step the gripper command differs from the previous step's (staged and
+    /// hybrid kinds). 0 (the default): gripper commands are free, and a policy may toggle the
+    /// gripper on its way to the object, where nothing in the reward tells the two apart.
+    pub gripper_switch: f32,
+    /// Staged kind: up to this much subtracted per step for the gripper's yaw misalignment
+    /// with the object, `align · |ψ| / 45° · (1 − tanh(4·d))` with ψ the relative yaw folded
+    /// into ±45° (a box's fourfold symmetry) and d the TCP–object distance: nothing far away,
+    /// the full weight at the object. 0 (the default): any yaw is free, and a policy may close
+    /// across a box's corners, which the simulator forgives more readily than another engine.
+    pub align: f32,
 }
 
 impl Default for GraspReward {
@@ -190,6 +200,8 @@ impl Default for GraspReward {
             time_penalty: 0.01,
             off_table_penalty: 10.0,
             success: 10.0,
+            gripper_switch: 0.0,
+            align: 0.0,
         }
     }
 }
@@ -204,6 +216,8 @@ impl RewardSettings for GraspReward {
             ("reward.time_penalty", self.time_penalty),
             ("reward.off_table_penalty", self.off_table_penalty),
             ("reward.success", self.success),
+            ("reward.gripper_switch", self.gripper_switch),
+            ("reward.align", self.align),
         ] {
             check_non_negative(key, v)?;
         }
@@ -224,6 +238,8 @@ pub struct Grasp {
     success: GraspSuccess,
     previous_distance: f32,
     grasp_paid: bool,
+    /// The gripper command of the previous step (for `reward.gripper_switch`).
+    previous_closing: bool,
 }
 
 /// Object `i`'s yaw relative to the TCP's (rad).
@@ -289,6 +305,7 @@ impl Task for Grasp {
             success: GraspSuccess::new(&config.task),
             previous_distance: 0.0,
             grasp_paid: false,
+            previous_closing: false,
         })
     }
 
@@ -296,6 +313,7 @@ impl Task for Grasp {
         scene.place_objects_at_random(rng)?;
         self.success = GraspSuccess::new(&self.settings);
         self.grasp_paid = false;
+        self.previous_closing = scene.gripper_commanded_closed();
         let tcp = scene.tcp_pose().translation.vector;
         self.previous_distance =
             (scene.object_state(0).pose.translation.vector - tcp).norm() as f32;
@@ -379,6 +397,13 @@ impl Task for Grasp {
                     if off_table { -(steps_left as f32) } else { 0.0 },
                 );
                 terms.set("success", if e.success { r.success } else { 0.0 });
+                if r.align > 0.0 {
+                    let quarter = std::f64::consts::FRAC_PI_4;
+                    let yaw =
+                        (relative_yaw(state, 0) + quarter).rem_euclid(2.0 * quarter) - quarter;
+                    let near = 1.0 - (4.0 * distance).tanh();
+                    terms.set("align", -r.align * (yaw.abs() / quarter) as f32 * near);
+                }
             }
             RewardKind::Hybrid => {
                 terms.set("approach", r.approach * (self.previous_distance - distance));
@@ -403,6 +428,14 @@ impl Task for Grasp {
                 );
             }
         }
+        if r.gripper_switch > 0.0 && r.kind != RewardKind::Sparse {
+            let switched = state.gripper_closing != self.previous_closing;
+            terms.set(
+                "gripper_switch",
+                if switched { -r.gripper_switch } else { 0.0 },
+            );
+        }
+        self.previous_closing = state.gripper_closing;
         self.previous_distance = distance;
         terms
     }
