@@ -144,6 +144,9 @@ struct Episode {
     steps: u32,
     ended: bool,
     ik_failures: u32,
+    /// The latest act's observation and the policy's action (as `fairgrasp eval --trace`
+    /// writes them).
+    last: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 struct Driver {
@@ -219,6 +222,7 @@ impl Driver {
             steps: 0,
             ended: false,
             ik_failures: 0,
+            last: None,
         });
         self.act()
     }
@@ -265,6 +269,7 @@ impl Driver {
         }
         let (action, shown) = self.io.env_action(&output).map_err(deploy_error)?;
         episode.shown = shown;
+        episode.last = Some((obs, output));
         if !self.io.apply(&episode.state, &action, &mut episode.command) {
             episode.ik_failures += 1;
         }
@@ -556,6 +561,12 @@ impl PolicyDriver {
     #[getter]
     fn ik_failures(&self) -> PyResult<u32> {
         self.read(|d| d.episode.as_ref().map_or(0, |e| e.ik_failures))
+    }
+
+    /// The latest step's observation and the policy's action, `(obs, action)` as lists (the
+    /// line `fairgrasp eval --trace` writes for a step); None before an episode's first act.
+    fn last_step(&self) -> PyResult<Option<(Vec<f32>, Vec<f32>)>> {
+        self.read(|d| d.episode.as_ref().and_then(|e| e.last.clone()))
     }
 
     /// The last estimated state's success-rule values: `grasped`, `lift` (m), `distance` (m),

@@ -36,8 +36,14 @@ def test_the_driver_runs_a_saved_model_as_the_deployment_does(trained_model):
     speed_cap, acc_cap = driver.ramp_caps
     assert math.isclose(speed_cap, math.radians(180)) and math.isclose(acc_cap, math.radians(720))
 
+    assert driver.last_step() is None
     set_points, gripper_open, held = driver.begin(*readings(driver))
     assert not held and isinstance(gripper_open, bool)
+    # What the policy saw and chose, as `fairgrasp eval --trace` writes it: the action's
+    # gripper value decides the command.
+    obs, action = driver.last_step()
+    assert len(obs) == 38 and len(action) == 5
+    assert (action[-1] > 0) == gripper_open
     previous = np.array(driver.home_rad)
     velocity = np.zeros(6)
     for step in range(8):
@@ -123,7 +129,7 @@ def test_bench_sim2sim_runs_episodes_in_mujoco(tmp_path, trained_model):
     env = dict(os.environ, FAIRGRASP_VENV=os.path.dirname(os.path.dirname(sys.executable)))
     done = subprocess.run(
         [str(REPO / "bench" / "sim2sim"), "--no-build", "--model", str(trained_model),
-         "--episodes", "2", "--json", "--out", str(out), "-v"],
+         "--episodes", "2", "--json", "--out", str(out), "-v", "--trace", str(tmp_path / "trace.jsonl")],
         capture_output=True, text=True, timeout=300, env=env,
     )
     assert done.returncode == 0, done.stderr + done.stdout
@@ -133,3 +139,7 @@ def test_bench_sim2sim_runs_episodes_in_mujoco(tmp_path, trained_model):
     detail = json.loads(out.read_text())["episodes_detail"]
     assert [e["seed"] for e in detail] == [2_000_000_000, 2_000_000_001]
     assert all(1 <= e["steps"] <= 100 for e in detail)
+    # One trace line per step the policy acted, in `fairgrasp eval --trace`'s format.
+    lines = [json.loads(line) for line in (tmp_path / "trace.jsonl").read_text().splitlines()]
+    assert len(lines) >= sum(e["steps"] for e in detail) - 2
+    assert all(len(line["obs"]) == 38 and len(line["action"]) == 5 for line in lines)

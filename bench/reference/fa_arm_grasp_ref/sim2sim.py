@@ -335,8 +335,10 @@ class Episode:
     ik_failures: int = 0
 
 
-def run_episode(driver, cell: MujocoCell, cube: dict, seed: int) -> Episode:
-    """One episode of the model in the MuJoCo cell (see the module documentation)."""
+def run_episode(driver, cell: MujocoCell, cube: dict, seed: int, trace=None) -> Episode:
+    """One episode of the model in the MuJoCo cell (see the module documentation). `trace`: a
+    text file that gets each step's `{"obs": [...], "action": [...]}` line, the format of
+    `fairgrasp eval --trace`, to set beside fairgrasp's own trace of the same seed."""
     min_lift, max_offset = driver.success_rule
     hold = driver.success_hold_steps
     rest_z = cube["rest_z"]
@@ -354,7 +356,13 @@ def run_episode(driver, cell: MujocoCell, cube: dict, seed: int) -> Episode:
         streak = streak + 1 if r["holds"] else 0
         return streak >= hold
 
+    def record() -> None:
+        if trace is not None and (last := driver.last_step()) is not None:
+            obs, action = last
+            trace.write(json.dumps({"obs": obs, "action": action}) + "\n")
+
     set_points, gripper_open, _ = driver.begin(*cell.readings())
+    record()
     for step in range(driver.max_steps):
         if step > 0:
             set_points, gripper_open, held = driver.step(*cell.readings())
@@ -371,6 +379,7 @@ def run_episode(driver, cell: MujocoCell, cube: dict, seed: int) -> Episode:
                         e.success = True
                         break
                 break
+            record()
         cell.drive(set_points, gripper_open)
         e.steps = step + 1
         if judge(gripper_open):
@@ -423,6 +432,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fairgrasp-bin", help="run fairgrasp's evaluation with this binary (`eval --json`) instead of fairgrasp.evaluate")
     parser.add_argument("-v", "--verbose", action="store_true", help="a line per episode")
     parser.add_argument(
+        "--trace", help="write every step's observation and action as JSON lines here (`fairgrasp eval --trace`'s format)",
+    )
+    parser.add_argument(
         "--opening", choices=["both", "left"], default="both",
         help="read the gripper's opening as q_left + q_right (default: the pads' distance) or as 2 x q_left",
     )
@@ -445,12 +457,13 @@ def main(argv: list[str] | None = None) -> int:
     config = tomllib.loads(driver.config_toml())
     cell: MujocoCell | None = None
     results: list[Episode] = []
+    trace = open(args.trace, "w") if args.trace else None
     for i in range(args.episodes):
         seed = args.seed + i
         cube = driver.placement(seed)
         if cell is None or not cell.fits(cube):
             cell = MujocoCell(config, cube, divisor=args.timestep_divisor)
-        e = run_episode(driver, cell, cube, seed)
+        e = run_episode(driver, cell, cube, seed, trace)
         results.append(e)
         if args.verbose:
             print(
@@ -458,6 +471,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"({e.ended_by}; max lift {e.max_lift_mm:.0f} mm)",
                 flush=True,
             )
+    if trace is not None:
+        trace.close()
     mujoco_seconds = time.monotonic() - started
     n = len(results)
     wins = sum(e.success for e in results)
