@@ -18,6 +18,17 @@ use crate::nn::Mlp;
 use candle_core::cpu::kernels::VecOps;
 use candle_core::{CpuStorage, Layout, Storage, Tensor};
 use gemm::{Parallelism, gemm};
+use std::sync::OnceLock;
+
+/// The thread count candle's CPU backend gives `gemm` (`RAYON_NUM_THREADS`, else the physical
+/// cores), read once per process. candle reads it on every call: without the variable that
+/// parses /proc/cpuinfo (460 times a second in the default training, 10 % of its time in the
+/// kernel); with it (`fairgrasp` sets it) the environment, which still cost the default
+/// training 4.5 % of its wall time (AMD EPYC 2-vCPU host, 5 alternated pairs).
+fn gemm_threads() -> usize {
+    static THREADS: OnceLock<usize> = OnceLock::new();
+    *THREADS.get_or_init(candle_core::utils::get_num_threads)
+}
 
 /// `dst (m × n, row-major) = lhs (m × k) · rhs (k × n)`, the operands given by their row and
 /// column strides: candle's CPU `matmul` call of `gemm`, so that the sums run in its order.
@@ -46,7 +57,7 @@ pub fn matmul(
         rhs.len() >= reach(rhs_rs, rhs_cs, k, n),
         "matmul rhs too short"
     );
-    let threads = candle_core::utils::get_num_threads();
+    let threads = gemm_threads();
     let parallelism = if threads > 1 {
         Parallelism::Rayon(threads)
     } else {
