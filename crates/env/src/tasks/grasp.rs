@@ -184,7 +184,8 @@ pub struct GraspReward {
     /// with the object, `align · |ψ| / 45° · (1 − tanh(4·d))` with ψ the relative yaw folded
     /// into ±45° (a box's fourfold symmetry) and d the TCP–object distance: nothing far away,
     /// the full weight at the object. 0 (the default): any yaw is free, and a policy may close
-    /// across a box's corners, which the simulator forgives more readily than another engine.
+    /// across a box's corners, which rapier forgives and MuJoCo's cell does not
+    /// (docs/deployment.md).
     pub align: f32,
 }
 
