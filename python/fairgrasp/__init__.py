@@ -27,7 +27,14 @@ by default (``rescale_action=True``), as the native trainer learns them; pass
 ``rescale_action=False`` for the env's own units (joint-angle deltas in radians, ...).
 """
 
-from fairgrasp._native import (
+import os
+
+# The networks' matrix products on one thread, as the `fairgrasp` command runs them
+# (crates/cli/src/main.rs: a SAC gradient step ~2.5x faster than on two), unless the user set
+# it. Left unset, candle also re-reads /proc/cpuinfo for its default on every product.
+os.environ.setdefault("RAYON_NUM_THREADS", "1")
+
+from fairgrasp._native import (  # noqa: E402 (after the thread setting above)
     ActionError,
     ConfigError,
     GripperRamp,

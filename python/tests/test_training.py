@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -91,3 +94,14 @@ def test_bad_training_settings_raise_config_error_naming_the_key(tmp_path):
         fairgrasp.train(env_id="PointReach-v0", run_dir=tmp_path / "z")
     assert 'env_id = "FaArmGrasp-v0"' in fairgrasp.default_train_config()
     assert 'algo = "sac"' in fairgrasp.default_train_config(algo="sac")
+
+
+def test_importing_fairgrasp_runs_the_networks_on_one_thread_unless_told_otherwise():
+    def seen(env):
+        code = "import os, fairgrasp; print(os.environ['RAYON_NUM_THREADS'])"
+        done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        return done.stdout.strip()
+
+    unset = {k: v for k, v in os.environ.items() if k != "RAYON_NUM_THREADS"}
+    assert seen(unset) == "1"
+    assert seen({**unset, "RAYON_NUM_THREADS": "3"}) == "3"
