@@ -9,7 +9,9 @@
 //! CPU (the twin runs its physics in real time).
 
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
+mod common;
+
+use common::twin_client;
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
@@ -62,15 +64,7 @@ fn grasps_on_the_twin(model: &str) {
         ..TwinConfig::ephemeral()
     })
     .unwrap();
-    let client = FairinoClient::connect(
-        "127.0.0.1",
-        &ClientConfig {
-            rpc_port: twin.rpc_addr().port(),
-            cnde_port: twin.cnde_addr().port(),
-            ..ClientConfig::default()
-        },
-    )
-    .unwrap();
+    let client = twin_client(&twin);
     let policy = Policy::load(&model_dir(model)).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let calibration = Calibration::identity(&io.limits_rad);

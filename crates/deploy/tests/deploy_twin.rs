@@ -3,7 +3,9 @@
 //! 100 ms of detection — ends the run with the fault named, and no motion command follows.
 
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
+mod common;
+
+use common::twin_client;
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunReport, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
@@ -22,15 +24,7 @@ fn model_dir() -> PathBuf {
 /// received `after` ServoJ calls. Returns the report and the twin.
 fn run_with(fault: Option<(&str, &str)>, after: usize, episodes: u32) -> (RunReport, TwinHandle) {
     let twin = Twin::spawn(TwinConfig::ephemeral()).unwrap();
-    let client = FairinoClient::connect(
-        "127.0.0.1",
-        &ClientConfig {
-            rpc_port: twin.rpc_addr().port(),
-            cnde_port: twin.cnde_addr().port(),
-            ..ClientConfig::default()
-        },
-    )
-    .unwrap();
+    let client = twin_client(&twin);
     let policy = Policy::load(&model_dir()).unwrap();
     let calibration = Calibration::identity(&ModelIo::for_policy(&policy).unwrap().limits_rad);
     let options = DeployOptions {
@@ -180,15 +174,7 @@ fn the_jog_test_moves_each_joint_and_back_on_the_twin() {
     use fairgrasp_deploy::robot::RobotLink;
     use fairgrasp_deploy::safety::{SafetyFilter, Watchdog};
     let twin = Twin::spawn(TwinConfig::ephemeral()).unwrap();
-    let mut client = FairinoClient::connect(
-        "127.0.0.1",
-        &ClientConfig {
-            rpc_port: twin.rpc_addr().port(),
-            cnde_port: twin.cnde_addr().port(),
-            ..ClientConfig::default()
-        },
-    )
-    .unwrap();
+    let mut client = twin_client(&twin);
     let io = ModelIo::for_config(fairgrasp_env::GraspConfig::default()).unwrap();
     let calibration = Calibration::identity(&io.limits_rad);
     let safety = SafetyConfig::default();

@@ -11,7 +11,9 @@
 //! the sender) is the shipped one.
 
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
+mod common;
+
+use common::twin_client;
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::robot::RobotLink;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
@@ -113,15 +115,7 @@ fn on_the_twin(model: &Path, episodes: u32) -> u32 {
         ..TwinConfig::ephemeral()
     })
     .unwrap();
-    let client = FairinoClient::connect(
-        "127.0.0.1",
-        &ClientConfig {
-            rpc_port: twin.rpc_addr().port(),
-            cnde_port: twin.cnde_addr().port(),
-            ..ClientConfig::default()
-        },
-    )
-    .unwrap();
+    let client = twin_client(&twin);
     let mut deployment = deployment(Box::new(client), Policy::load(model).unwrap(), episodes);
     let mut host = TwinHost::detect(&twin.rpc_addr().to_string(), 1)
         .unwrap()
