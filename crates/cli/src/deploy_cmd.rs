@@ -28,6 +28,13 @@ pub struct RobotArgs {
     /// Timeout of every call (ms); MoveJ gets its own, longer one.
     #[arg(long, default_value_t = 200)]
     pub call_timeout_ms: u64,
+    /// Send the servo commands over the controller's real-time UDP path (the SDK's
+    /// `cmdType = 1`): no reply to wait for, so a slow controller cannot hold the loop back.
+    /// Without it they go over XML-RPC, each waiting for its reply.
+    #[arg(long)]
+    pub servo_udp: bool,
+    #[arg(long, default_value_t = fairgrasp_deploy::fairino::udp::DEFAULT_PORT)]
+    pub servo_udp_port: u16,
 }
 
 impl RobotArgs {
@@ -36,6 +43,7 @@ impl RobotArgs {
             rpc_port: self.rpc_port,
             cnde_port: self.cnde_port,
             call_timeout: Duration::from_millis(self.call_timeout_ms),
+            servo_udp_port: self.servo_udp.then_some(self.servo_udp_port),
             ..ClientConfig::default()
         };
         FairinoClient::connect(&self.robot, &config)

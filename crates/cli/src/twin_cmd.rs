@@ -35,6 +35,12 @@ pub struct TwinArgs {
     pub rpc_port: u16,
     #[arg(long, default_value_t = 20005)]
     pub cnde_port: u16,
+    /// UDP port of the real-time servo commands (the SDK's `cmdType = 1`).
+    #[arg(long, default_value_t = fairgrasp_deploy::fairino::udp::DEFAULT_PORT)]
+    pub servo_udp_port: u16,
+    /// Serve no real-time servo port.
+    #[arg(long)]
+    pub no_servo_udp: bool,
     /// TCP port of the object-pose feed (JSON lines, robot base frame).
     #[arg(long, default_value_t = 20100)]
     pub pose_port: u16,
@@ -166,6 +172,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
         bind: args.bind,
         rpc_port: args.rpc_port,
         cnde_port: args.cnde_port,
+        servo_udp_port: (!args.no_servo_udp).then_some(args.servo_udp_port),
         pose_port: (!args.no_pose_feed).then_some(args.pose_port),
         pose_udp: args.pose_udp,
         seed: args.seed,
@@ -198,6 +205,9 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     );
     println!("  XML-RPC      http://{}/RPC2", twin.rpc_addr());
     println!("  CNDE stream  {}", twin.cnde_addr());
+    if let Some(addr) = twin.servo_udp_addr() {
+        println!("  servo UDP    {addr} (real-time ServoJ, cmdType 1)");
+    }
     match twin.pose_addr() {
         Some(addr) => println!("  object pose  {addr} (JSON lines, robot base frame)"),
         None => println!("  object pose  no TCP feed"),

@@ -11,7 +11,7 @@
 use fairgrasp_deploy::calibration::Calibration;
 mod common;
 
-use common::twin_client;
+use common::{twin_client, twin_client_with};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
@@ -38,7 +38,21 @@ fn model_dir(name: &str) -> PathBuf {
 fn a_policy_trained_through_the_servo_model_grasps_on_the_twin() {
     // `configs/ppo_deploy.toml`, seed 42 (with [readings]): 39 of 40 at scale 0.5, 38 of 40 at
     // 0.25 and 40 of 40 at 1 on the deployment-matched evaluation.
-    grasps_on_the_twin("deploy_ppo");
+    grasps_on_the_twin("deploy_ppo", Servo::XmlRpc);
+}
+
+#[test]
+fn the_same_policy_grasps_over_the_real_time_udp_servo_path() {
+    grasps_on_the_twin("deploy_ppo", Servo::Udp);
+}
+
+/// How the servo commands travel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Servo {
+    /// XML-RPC calls, each waiting for its reply.
+    XmlRpc,
+    /// UDP datagrams (`cmdType = 1`), no reply.
+    Udp,
 }
 
 #[test]
@@ -47,13 +61,13 @@ fn a_policy_trained_through_the_servo_model_grasps_on_the_twin() {
             [readings] is stopped by the workspace box): open in the transfer issue"]
 fn a_policy_trained_on_the_kinematic_drive_grasps_on_the_pd_twin() {
     // 18 of 20 at speed scale 0.25 with the session-13 loop (docs/simulation.md).
-    grasps_on_the_twin("deploy_ppo_kinematic");
+    grasps_on_the_twin("deploy_ppo_kinematic", Servo::XmlRpc);
 }
 
 /// Three episodes at speed scale 0.5: at least two grasps (one miss is allowed for a loaded
 /// host or the policy's rare failure), episodes ended by the success rule, the gripper at the
-/// speed scale.
-fn grasps_on_the_twin(model: &str) {
+/// speed scale, the servo commands on the path asked for.
+fn grasps_on_the_twin(model: &str, servo: Servo) {
     let _turn = TWIN.lock().unwrap_or_else(|e| e.into_inner());
     let faults = ["latency_ms=10", "joint_noise_deg=0.05"]
         .iter()
@@ -64,7 +78,12 @@ fn grasps_on_the_twin(model: &str) {
         ..TwinConfig::ephemeral()
     })
     .unwrap();
-    let client = twin_client(&twin);
+    let client = match servo {
+        Servo::XmlRpc => twin_client(&twin),
+        Servo::Udp => twin_client_with(&twin, |c| {
+            c.servo_udp_port = Some(twin.servo_udp_addr().unwrap().port())
+        }),
+    };
     let policy = Policy::load(&model_dir(model)).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let calibration = Calibration::identity(&io.limits_rad);
@@ -139,4 +158,14 @@ fn grasps_on_the_twin(model: &str) {
         speeds.iter().all(|v| v == &serde_json::json!(50)),
         "{speeds:?}"
     );
+    let count = |method: &str| twin.calls().iter().filter(|c| c.method == method).count();
+    let (rpc, udp) = (count("ServoJ"), count("udp:ServoJ"));
+    match servo {
+        Servo::XmlRpc => assert!(rpc > 100 && udp == 0, "{rpc} XML-RPC, {udp} UDP"),
+        Servo::Udp => {
+            assert!(udp > 100 && rpc == 0, "{rpc} XML-RPC, {udp} UDP");
+            assert_eq!(count("udp:ServoMoveStart"), count("udp:ServoMoveEnd"));
+            assert_eq!(twin.udp_rejected(), 0);
+        }
+    }
 }

@@ -577,3 +577,80 @@ fn fairino_client_commands_the_twin() {
         .unwrap_err();
     assert!(err.to_string().contains("31"), "{err}");
 }
+
+/// The real-time path: servo commands as UDP datagrams (`cmdType = 1`) move the twin's arm
+/// under the same rules as over XML-RPC; a datagram that is not a servo command moves nothing
+/// and is logged with the reason.
+#[test]
+fn servo_commands_over_udp_move_the_arm_and_bad_datagrams_are_refused() {
+    let twin = twin();
+    let udp_port = twin.servo_udp_addr().expect("served by default").port();
+    let config = ClientConfig {
+        rpc_port: twin.rpc_addr().port(),
+        cnde_port: twin.cnde_addr().port(),
+        servo_udp_port: Some(udp_port),
+        ..ClientConfig::default()
+    };
+    let mut robot = FairinoClient::connect("127.0.0.1", &config).unwrap();
+    let start = robot.joints_deg().unwrap();
+    // Outside a servo session the controller refuses ServoJ (code 14): nothing moves.
+    let mut q = start;
+    q[0] += 3.0;
+    robot
+        .send(&RobotCommand::ServoJ {
+            joints_deg: q,
+            cmd_t: 0.008,
+        })
+        .unwrap();
+    let refused = || {
+        twin.calls()
+            .iter()
+            .any(|c| c.method == "udp:ServoJ" && c.reply == serde_json::json!(14))
+    };
+    assert!(eventually(Duration::from_secs(2), refused));
+    robot.send(&RobotCommand::ServoMoveStart).unwrap();
+    let mut q = start;
+    for _ in 0..25 {
+        q[0] += 0.2;
+        robot
+            .send(&RobotCommand::ServoJ {
+                joints_deg: q,
+                cmd_t: 0.008,
+            })
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(8));
+    }
+    robot.send(&RobotCommand::ServoMoveEnd).unwrap();
+    assert!(eventually(Duration::from_secs(2), || {
+        (robot.latest_state().unwrap().state.joints_deg[0] - q[0]).abs() < 0.1
+    }));
+    let methods: Vec<String> = twin.calls().into_iter().map(|c| c.method).collect();
+    assert!(!methods.iter().any(|m| m == "ServoJ"), "no XML-RPC servo");
+    assert_eq!(methods.iter().filter(|m| *m == "udp:ServoJ").count(), 26);
+    // Garbage, a command the port does not serve, a ServoJ with a NaN: none moves the arm.
+    let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let nan_j = "ServoJ(30,0,0,0,0,NaN,0,0,0,0,0,0,0.008,0,0,0)";
+    for datagram in [
+        "hello".to_string(),
+        fairgrasp_deploy::fairino::udp::encode(1, 201, "MoveJ()"),
+        fairgrasp_deploy::fairino::udp::encode(2, 376, nan_j),
+    ] {
+        socket
+            .send_to(datagram.as_bytes(), ("127.0.0.1", udp_port))
+            .unwrap();
+    }
+    assert!(eventually(Duration::from_secs(2), || twin.udp_rejected() == 3));
+    let reasons: Vec<_> = twin
+        .calls()
+        .into_iter()
+        .filter(|c| c.method == "udp")
+        .map(|c| c.reply["rejected"].as_str().unwrap_or_default().to_string())
+        .collect();
+    assert!(reasons[0].contains("framed"), "{reasons:?}");
+    assert!(reasons[1].contains("not served"), "{reasons:?}");
+    assert!(reasons[2].contains("finite"), "{reasons:?}");
+    std::thread::sleep(Duration::from_millis(100));
+    let j0 = twin.state().joints_deg[0];
+    // Settled where the stream left it (the PD drive's overshoot is ~0.1°), not at 30°.
+    assert!((j0 - q[0]).abs() < 0.5, "{j0} vs {}", q[0]);
+}

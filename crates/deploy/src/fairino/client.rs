@@ -5,9 +5,11 @@
 
 use super::cnde::{CndeClient, DEFAULT_PERIOD_MS, default_state_names};
 use super::error_codes::error_code_meaning;
+use super::udp::{self, ServoSender};
 use super::xmlrpc::{Value, XmlRpcClient};
 use crate::robot::{RobotCommand, RobotLink, StampedState};
 use crate::{DeployError, Result};
+use std::sync::Mutex;
 use std::time::Duration;
 
 /// Ports and timeouts of a [`FairinoClient`].
@@ -27,6 +29,10 @@ pub struct ClientConfig {
     pub period_ms: u16,
     /// CNDE state names to ask for (the vendor SDK's default set by default).
     pub state_names: Vec<String>,
+    /// `Some(port)`: servo commands (`ServoMoveStart`, `ServoJ`, `ServoMoveEnd`) go over the
+    /// controller's real-time UDP path (20007 on the controller, the SDK's `cmdType = 1`),
+    /// fire-and-forget; `None`: over XML-RPC, each waiting for its reply.
+    pub servo_udp_port: Option<u16>,
 }
 
 impl Default for ClientConfig {
@@ -39,6 +45,7 @@ impl Default for ClientConfig {
             move_timeout: Duration::from_secs(60),
             period_ms: DEFAULT_PERIOD_MS,
             state_names: default_state_names(),
+            servo_udp_port: None,
         }
     }
 }
@@ -47,6 +54,7 @@ impl Default for ClientConfig {
 pub struct FairinoClient {
     rpc: XmlRpcClient,
     cnde: CndeClient,
+    servo_udp: Option<Mutex<ServoSender>>,
     config: ClientConfig,
 }
 
@@ -73,9 +81,17 @@ impl FairinoClient {
         )?;
         let rpc = XmlRpcClient::new(&host_port(ip, config.rpc_port), config.call_timeout);
         rpc.call_with_timeout("GetControllerIP", &[], config.connect_timeout)?;
+        let servo_udp = match config.servo_udp_port {
+            Some(port) => Some(Mutex::new(ServoSender::connect(
+                &host_port(ip, port),
+                config.call_timeout,
+            )?)),
+            None => None,
+        };
         Ok(FairinoClient {
             rpc,
             cnde,
+            servo_udp,
             config: config.clone(),
         })
     }
@@ -185,6 +201,25 @@ impl FairinoClient {
             let state = self.cnde.latest()?.state;
             if state.safety_stop.iter().any(|&stop| stop) {
                 return Err(controller(method, 99));
+            }
+        }
+        if let Some(sender) = &self.servo_udp {
+            let udp_command = match command {
+                RobotCommand::ServoMoveStart => {
+                    Some((udp::SERVO_MOVE_START, "ServoMoveStart()".to_string()))
+                }
+                RobotCommand::ServoMoveEnd => {
+                    Some((udp::SERVO_MOVE_END, "ServoMoveEnd()".to_string()))
+                }
+                RobotCommand::ServoJ { joints_deg, cmd_t } => {
+                    finite(method, joints_deg)?;
+                    finite(method, &[*cmd_t])?;
+                    Some((udp::SERVO_J, udp::servo_j_content(joints_deg, *cmd_t)))
+                }
+                _ => None,
+            };
+            if let Some((id, content)) = udp_command {
+                return sender.lock().expect("UDP sender lock").send(id, &content);
             }
         }
         let call = self.config.call_timeout;

@@ -4,12 +4,14 @@
 //!
 //! - [`xmlrpc`]: XML-RPC values, a client with timeouts and a threaded server.
 //! - [`cnde`]: frames, the state-field table, a streaming server and client.
-//! - [`client::FairinoClient`]: a [`crate::RobotLink`] over both.
+//! - [`udp`]: the real-time command path on UDP 20007 (`cmdType = 1` servo commands).
+//! - [`client::FairinoClient`]: a [`crate::RobotLink`] over them.
 //! - [`error_codes`]: what the controller's error codes mean.
 
 pub mod client;
 pub mod cnde;
 pub mod error_codes;
+pub mod udp;
 pub mod xmlrpc;
 
 pub use client::{ClientConfig, FairinoClient};

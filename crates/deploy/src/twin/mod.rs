@@ -9,6 +9,8 @@
 //! - [`world`]: the task's scene stepped in real time on its own thread, and the task's judge
 //!   of each episode;
 //! - [`service`]: the XML-RPC methods, the vendor's and the twin's own (`Twin…`);
+//! - [`servo_udp`]: the real-time servo commands on UDP (127.0.0.1:20007), the SDK's
+//!   `cmdType = 1`;
 //! - [`faults`]: what can be injected, and how;
 //! - [`pose_feed`]: the object's pose as the user's perception would publish it;
 //! - [`call_log`]: every call received.
@@ -34,6 +36,7 @@ pub mod gripper;
 pub mod motion;
 pub mod pose_feed;
 pub mod service;
+pub mod servo_udp;
 mod sim_loop;
 pub mod simulated;
 pub mod world;
@@ -55,6 +58,7 @@ use pose_feed::PoseFeed;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
+use servo_udp::ServoPort;
 use std::collections::VecDeque;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
@@ -79,6 +83,8 @@ pub struct TwinConfig {
     /// Port 0: any free port (see the handle for the one taken).
     pub rpc_port: u16,
     pub cnde_port: u16,
+    /// The real-time servo port (UDP, 20007 on the controller); `None`: not served.
+    pub servo_udp_port: Option<u16>,
     /// `None`: no object-pose feed over TCP.
     pub pose_port: Option<u16>,
     /// Where to send the pose feed as UDP datagrams too.
@@ -102,6 +108,7 @@ impl Default for TwinConfig {
             bind: IpAddr::V4(Ipv4Addr::LOCALHOST),
             rpc_port: 20003,
             cnde_port: 20005,
+            servo_udp_port: Some(crate::fairino::udp::DEFAULT_PORT),
             pose_port: Some(20100),
             pose_udp: None,
             pose_period: Duration::from_millis(33),
@@ -119,6 +126,7 @@ impl TwinConfig {
         Self {
             rpc_port: 0,
             cnde_port: 0,
+            servo_udp_port: Some(0),
             pose_port: Some(0),
             ..Self::default()
         }
@@ -155,6 +163,8 @@ pub(crate) struct Shared {
     pub(crate) cnde: Arc<CndeControl>,
     pub(crate) shutdown: AtomicBool,
     pub(crate) overruns: AtomicU64,
+    /// Datagrams on the servo port that were not a servo command.
+    pub(crate) udp_rejected: AtomicU64,
     pub(crate) env_id: String,
     pub(crate) controller_ip: String,
 }
@@ -305,6 +315,7 @@ pub struct TwinHandle {
     shared: Arc<Shared>,
     rpc: XmlRpcServer,
     cnde: CndeServer,
+    servo_udp: Option<ServoPort>,
     pose: Option<PoseFeed>,
     sim: Option<JoinHandle<()>>,
 }
@@ -346,6 +357,7 @@ impl Twin {
             cnde: CndeControl::new(),
             shutdown: AtomicBool::new(false),
             overruns: AtomicU64::new(0),
+            udp_rejected: AtomicU64::new(0),
             env_id: config.env_id.clone(),
             controller_ip: config.bind.to_string(),
         });
@@ -367,6 +379,16 @@ impl Twin {
         };
         let cnde = CndeServer::spawn(cnde_addr, source, shared.cnde.clone())
             .map_err(|e| listen_error("CNDE", cnde_addr, e))?;
+        let servo_udp = match config.servo_udp_port {
+            Some(port) => {
+                let addr = SocketAddr::new(config.bind, port);
+                Some(
+                    ServoPort::spawn(addr, shared.clone())
+                        .map_err(|e| listen_error("UDP servo port", addr, e))?,
+                )
+            }
+            None => None,
+        };
         let pose = match config.pose_port {
             Some(port) => {
                 let addr = SocketAddr::new(config.bind, port);
@@ -391,6 +413,7 @@ impl Twin {
             shared,
             rpc,
             cnde,
+            servo_udp,
             pose,
             sim: Some(sim),
         })
@@ -406,6 +429,16 @@ impl TwinHandle {
     /// Where the CNDE stream is served.
     pub fn cnde_addr(&self) -> SocketAddr {
         self.cnde.local_addr()
+    }
+
+    /// Where the real-time servo commands are received (UDP).
+    pub fn servo_udp_addr(&self) -> Option<SocketAddr> {
+        self.servo_udp.as_ref().map(|p| p.local_addr())
+    }
+
+    /// Datagrams on the servo port that were not a servo command (each is in the call log).
+    pub fn udp_rejected(&self) -> u64 {
+        self.shared.udp_rejected.load(Ordering::Relaxed)
     }
 
     /// Where the object-pose feed is served over TCP.
@@ -501,6 +534,9 @@ impl Drop for TwinHandle {
         self.rpc.shutdown();
         self.cnde.shutdown();
         self.pose = None;
+        if let Some(port) = self.servo_udp.as_mut() {
+            port.join();
+        }
         if let Some(sim) = self.sim.take() {
             let _ = sim.join();
         }

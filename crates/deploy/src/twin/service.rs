@@ -404,6 +404,27 @@ fn pause(seconds: f64) {
     }
 }
 
+impl TwinService {
+    /// A command that expects no reply (the UDP port): the injected latency's one-way half
+    /// before it, nothing after; logged as `udp:{method}`.
+    pub(crate) fn call_one_way(&self, method: &str, params: Vec<Value>) {
+        let arrived = self.shared.now();
+        let (before, _) = self.delays(method);
+        pause(before);
+        let reply = self.dispatch(method, &params);
+        self.shared.calls.record(CallRecord {
+            t: arrived,
+            method: format!("udp:{method}"),
+            params: params.iter().map(to_json).collect(),
+            reply: match &reply {
+                Ok(v) => to_json(v),
+                Err(f) => serde_json::json!({"fault": f.code, "message": f.message}),
+            },
+            seconds: self.shared.now() - arrived,
+        });
+    }
+}
+
 impl Handler for TwinService {
     fn call(&self, method: &str, params: Vec<Value>) -> Result<Value, Fault> {
         let arrived = self.shared.now();
