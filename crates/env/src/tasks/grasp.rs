@@ -187,6 +187,19 @@ pub struct GraspReward {
     /// across a box's corners, which rapier forgives and MuJoCo's cell does not
     /// (docs/deployment.md).
     pub align: f32,
+    /// Staged kind: up to this much subtracted per step while the object slides on the table
+    /// before it is grasped, `push · min(1, |v_xy| / 5 cm/s)` with v_xy the object's horizontal
+    /// velocity. 0 (the default): shoving the object is free, and a policy may close while the
+    /// arm still moves sideways, which rapier's contacts forgive and MuJoCo's do not
+    /// (docs/deployment.md).
+    pub push: f32,
+    /// Staged kind: subtracted when the gripper is commanded closed with the object between the
+    /// pads but off their centre, `center · min(1, |y| / 1 cm)` with y the object's offset along
+    /// the fingers' axis (the TCP's y) at the previous step, when the command was decided;
+    /// "between": within 2 cm of the TCP along x and z, inside the open stroke along y. 0 (the
+    /// default): an off-centre close is free, and the first finger to arrive shoves the object
+    /// towards the other, which rapier forgives and MuJoCo's cell does not (docs/deployment.md).
+    pub center: f32,
 }
 
 impl Default for GraspReward {
@@ -203,6 +216,8 @@ impl Default for GraspReward {
             success: 10.0,
             gripper_switch: 0.0,
             align: 0.0,
+            push: 0.0,
+            center: 0.0,
         }
     }
 }
@@ -219,6 +234,8 @@ impl RewardSettings for GraspReward {
             ("reward.success", self.success),
             ("reward.gripper_switch", self.gripper_switch),
             ("reward.align", self.align),
+            ("reward.push", self.push),
+            ("reward.center", self.center),
         ] {
             check_non_negative(key, v)?;
         }
@@ -239,8 +256,21 @@ pub struct Grasp {
     success: GraspSuccess,
     previous_distance: f32,
     grasp_paid: bool,
-    /// The gripper command of the previous step (for `reward.gripper_switch`).
+    /// The gripper command of the previous step (for `reward.gripper_switch` and
+    /// `reward.center`).
     previous_closing: bool,
+    /// The object's offset between the pads at the previous step (for `reward.center`).
+    previous_off_centre: Option<f64>,
+}
+
+/// Object `i`'s offset along the fingers' axis (the TCP's y, m) while it sits between the
+/// pads: within 2 cm of the TCP along its x and z, inside the open stroke along y.
+pub(crate) fn off_centre(state: &ArmState, i: usize) -> Option<f64> {
+    let local = state.tcp.rotation.inverse() * state.tcp_to_object(i);
+    let between = local.x.abs() < 0.02
+        && local.z.abs() < 0.02
+        && local.y.abs() < 0.5 * state.gripper_max_opening as f64;
+    between.then_some(local.y)
 }
 
 /// Object `i`'s yaw relative to the TCP's (rad).
@@ -307,6 +337,7 @@ impl Task for Grasp {
             previous_distance: 0.0,
             grasp_paid: false,
             previous_closing: false,
+            previous_off_centre: None,
         })
     }
 
@@ -315,6 +346,11 @@ impl Task for Grasp {
         self.success = GraspSuccess::new(&self.settings);
         self.grasp_paid = false;
         self.previous_closing = scene.gripper_commanded_closed();
+        self.previous_off_centre = if self.reward.center > 0.0 {
+            off_centre(&ArmState::from_scene(scene), 0)
+        } else {
+            None
+        };
         let tcp = scene.tcp_pose().translation.vector;
         self.previous_distance =
             (scene.object_state(0).pose.translation.vector - tcp).norm() as f32;
@@ -404,6 +440,18 @@ impl Task for Grasp {
                         (relative_yaw(state, 0) + quarter).rem_euclid(2.0 * quarter) - quarter;
                     let near = 1.0 - (4.0 * distance).tanh();
                     terms.set("align", -r.align * (yaw.abs() / quarter) as f32 * near);
+                }
+                if r.push > 0.0 {
+                    let v = state.objects[0].linvel.xy().norm() as f32;
+                    let sliding = if grasped { 0.0 } else { (v / 0.05).min(1.0) };
+                    terms.set("push", -r.push * sliding);
+                }
+                if r.center > 0.0 {
+                    let closed_now = state.gripper_closing && !self.previous_closing;
+                    let off = self.previous_off_centre.filter(|_| closed_now);
+                    let cost = off.map_or(0.0, |y| (y.abs() / 0.01).min(1.0) as f32);
+                    terms.set("center", -r.center * cost);
+                    self.previous_off_centre = off_centre(state, 0);
                 }
             }
             RewardKind::Hybrid => {
