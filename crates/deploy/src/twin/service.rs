@@ -412,11 +412,16 @@ impl TwinService {
         let (before, _) = self.delays(method);
         pause(before);
         let reply = self.dispatch(method, &params);
+        self.record(arrived, format!("udp:{method}"), &params, &reply);
+    }
+
+    /// Puts a call that arrived at `arrived` into the call log.
+    fn record(&self, arrived: f64, method: String, params: &[Value], reply: &Reply) {
         self.shared.calls.record(CallRecord {
             t: arrived,
-            method: format!("udp:{method}"),
+            method,
             params: params.iter().map(to_json).collect(),
-            reply: match &reply {
+            reply: match reply {
                 Ok(v) => to_json(v),
                 Err(f) => serde_json::json!({"fault": f.code, "message": f.message}),
             },
@@ -432,16 +437,7 @@ impl Handler for TwinService {
         pause(before);
         let reply = self.dispatch(method, &params);
         pause(after);
-        self.shared.calls.record(CallRecord {
-            t: arrived,
-            method: method.to_string(),
-            params: params.iter().map(to_json).collect(),
-            reply: match &reply {
-                Ok(v) => to_json(v),
-                Err(f) => serde_json::json!({"fault": f.code, "message": f.message}),
-            },
-            seconds: self.shared.now() - arrived,
-        });
+        self.record(arrived, method.to_string(), &params, &reply);
         reply
     }
 }

@@ -104,7 +104,11 @@ fn run(socket: UdpSocket, shared: Arc<Shared>) {
             {
                 continue;
             }
-            Err(_) => continue,
+            // Anything else (an ICMP error surfacing): wait a poll period rather than spin.
+            Err(_) => {
+                std::thread::sleep(POLL);
+                continue;
+            }
         };
         match as_call(&buf[..n]) {
             Ok((method, params)) => service.call_one_way(method, params),
