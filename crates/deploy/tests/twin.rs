@@ -2,9 +2,9 @@
 //! SDK's argument lists, our own XML-RPC and CNDE clients, every injected fault, episodes and
 //! the object-pose feed, and a scripted grasp judged by the task's rule.
 
+use fairgrasp_deploy::fairino::FairinoClient;
 use fairgrasp_deploy::fairino::cnde::{CndeClient, default_state_names};
 use fairgrasp_deploy::fairino::xmlrpc::{Value, XmlRpcClient};
-use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
 use fairgrasp_deploy::pose_source::PoseMessage;
 use fairgrasp_deploy::twin::controller::{MAIN_CODE_EMERGENCY_STOP, StartState};
 use fairgrasp_deploy::twin::faults::FaultCommand;
@@ -14,6 +14,9 @@ use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
 use std::process::Command;
 use std::time::{Duration, Instant};
+
+mod common;
+use common::{twin_client, twin_client_with};
 
 fn twin() -> TwinHandle {
     Twin::spawn(TwinConfig::ephemeral()).unwrap()
@@ -514,28 +517,11 @@ fn a_scripted_grasp_over_xmlrpc_succeeds_by_the_tasks_rule() {
     assert_eq!(twin.tally().episodes, 1);
 }
 
-/// The deploy loop's own client (`FairinoClient`) against the twin.
-#[test]
-fn fairino_client_commands_the_twin() {
-    let twin = twin();
-    let config = ClientConfig {
-        rpc_port: twin.rpc_addr().port(),
-        cnde_port: twin.cnde_addr().port(),
-        ..ClientConfig::default()
-    };
-    let mut robot = FairinoClient::connect("127.0.0.1", &config).unwrap();
-    let start = robot.joints_deg().unwrap();
-    let mut target = start;
-    target[1] += 5.0;
-    robot
-        .send(&RobotCommand::MoveJ {
-            joints_deg: target,
-            speed_percent: 30.0,
-        })
-        .unwrap();
-    assert!((robot.joints_deg().unwrap()[1] - target[1]).abs() < 1.0);
+/// A servo session from `from`: 25 ServoJ 8 ms apart, joint 1 up 0.2° each; returns the last
+/// set point.
+fn stream_joint_1(robot: &mut FairinoClient, from: [f64; 6]) -> [f64; 6] {
     robot.send(&RobotCommand::ServoMoveStart).unwrap();
-    let mut q = target;
+    let mut q = from;
     for _ in 0..25 {
         q[0] += 0.2;
         robot
@@ -547,6 +533,25 @@ fn fairino_client_commands_the_twin() {
         std::thread::sleep(Duration::from_millis(8));
     }
     robot.send(&RobotCommand::ServoMoveEnd).unwrap();
+    q
+}
+
+/// The deploy loop's own client (`FairinoClient`) against the twin.
+#[test]
+fn fairino_client_commands_the_twin() {
+    let twin = twin();
+    let mut robot = twin_client(&twin);
+    let start = robot.joints_deg().unwrap();
+    let mut target = start;
+    target[1] += 5.0;
+    robot
+        .send(&RobotCommand::MoveJ {
+            joints_deg: target,
+            speed_percent: 30.0,
+        })
+        .unwrap();
+    assert!((robot.joints_deg().unwrap()[1] - target[1]).abs() < 1.0);
+    let q = stream_joint_1(&mut robot, target);
     robot
         .send(&RobotCommand::ActGripper {
             index: 1,
@@ -585,13 +590,7 @@ fn fairino_client_commands_the_twin() {
 fn servo_commands_over_udp_move_the_arm_and_bad_datagrams_are_refused() {
     let twin = twin();
     let udp_port = twin.servo_udp_addr().expect("served by default").port();
-    let config = ClientConfig {
-        rpc_port: twin.rpc_addr().port(),
-        cnde_port: twin.cnde_addr().port(),
-        servo_udp_port: Some(udp_port),
-        ..ClientConfig::default()
-    };
-    let mut robot = FairinoClient::connect("127.0.0.1", &config).unwrap();
+    let mut robot = twin_client_with(&twin, |c| c.servo_udp_port = Some(udp_port));
     let start = robot.joints_deg().unwrap();
     // Outside a servo session the controller refuses ServoJ (code 14): nothing moves.
     let mut q = start;
@@ -608,19 +607,7 @@ fn servo_commands_over_udp_move_the_arm_and_bad_datagrams_are_refused() {
             .any(|c| c.method == "udp:ServoJ" && c.reply == serde_json::json!(14))
     };
     assert!(eventually(Duration::from_secs(2), refused));
-    robot.send(&RobotCommand::ServoMoveStart).unwrap();
-    let mut q = start;
-    for _ in 0..25 {
-        q[0] += 0.2;
-        robot
-            .send(&RobotCommand::ServoJ {
-                joints_deg: q,
-                cmd_t: 0.008,
-            })
-            .unwrap();
-        std::thread::sleep(Duration::from_millis(8));
-    }
-    robot.send(&RobotCommand::ServoMoveEnd).unwrap();
+    let q = stream_joint_1(&mut robot, start);
     assert!(eventually(Duration::from_secs(2), || {
         (robot.latest_state().unwrap().state.joints_deg[0] - q[0]).abs() < 0.1
     }));

@@ -4,7 +4,9 @@ use fairgrasp_env::arm::{ActionMode, Task};
 use fairgrasp_env::core::EpisodeEvent;
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::sim::pick::{GraspStatus, SuccessTracker};
-use fairgrasp_env::tasks::grasp::{GraspConfig as EnvConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::tasks::grasp::{
+    GraspConfig as EnvConfig, GraspReward, ObservationPreset, RewardKind,
+};
 use fairgrasp_env::{Env, EnvError, GraspEnv};
 use rand::SeedableRng;
 
@@ -398,11 +400,7 @@ fn a_gripper_switch_costs_its_weight_and_nothing_is_reported_at_the_default() {
 #[test]
 fn the_alignment_term_grows_with_the_folded_yaw_near_the_object() {
     let weight = 0.5;
-    let mut env = env_with(|c| {
-        c.reward.kind = RewardKind::Staged;
-        c.reward.align = weight;
-        c.control.action_mode = ActionMode::Cartesian;
-    });
+    let mut env = staged_cartesian(|r| r.align = weight);
     let quarter = std::f64::consts::FRAC_PI_4;
     let mut seen = Vec::new();
     for seed in 0..12 {
@@ -550,11 +548,7 @@ fn the_default_rule_is_the_scripted_picks() {
 #[test]
 fn the_push_term_follows_the_objects_sliding_speed_until_it_is_grasped() {
     let weight = 0.4;
-    let mut env = env_with(|c| {
-        c.reward.kind = RewardKind::Staged;
-        c.reward.push = weight;
-        c.control.action_mode = ActionMode::Cartesian;
-    });
+    let mut env = staged_cartesian(|r| r.push = weight);
     env.reset(Some(3)).unwrap();
     let cube = env.state().unwrap().objects[0].pose.translation.vector;
     // Closed fingers at the cube's height, from 10 cm on one side to 10 cm past the other:
@@ -567,10 +561,7 @@ fn the_push_term_follows_the_objects_sliding_speed_until_it_is_grasped() {
     let mut pushes = Vec::new();
     for target in waypoints {
         for _ in 0..25 {
-            let tcp = env.state().unwrap().tcp.translation.vector;
-            let d = (target - tcp) / 0.02;
-            let a = [d.x, d.y, d.z].map(|v| (v as f32).clamp(-1.0, 1.0));
-            let step = env.step(&[a[0], a[1], a[2], 0.0, -1.0]).unwrap();
+            let step = step_towards(&mut env, target, -1.0);
             let s = env.state().unwrap();
             let v = s.objects[0].linvel.xy().norm() as f32;
             let expected = if s.grasped(0) {
@@ -595,6 +586,27 @@ fn the_push_term_follows_the_objects_sliding_speed_until_it_is_grasped() {
     assert!(pushes[3..20].iter().all(|&p| p > -1e-3), "{pushes:?}");
 }
 
+/// A staged-reward env in Cartesian mode, with `set` applied to the reward's weights.
+fn staged_cartesian(set: impl FnOnce(&mut GraspReward)) -> GraspEnv {
+    env_with(|c| {
+        c.reward.kind = RewardKind::Staged;
+        c.control.action_mode = ActionMode::Cartesian;
+        set(&mut c.reward);
+    })
+}
+
+/// One step moving the TCP straight towards `target` (at most 2 cm per full action), yaw held.
+fn step_towards(
+    env: &mut GraspEnv,
+    target: fairgrasp_env::sim::rapier3d::na::Vector3<f64>,
+    gripper: f32,
+) -> fairgrasp_env::Step {
+    let tcp = env.state().unwrap().tcp.translation.vector;
+    let d = (target - tcp) / 0.02;
+    let a = [d.x, d.y, d.z].map(|v| (v as f32).clamp(-1.0, 1.0));
+    env.step(&[a[0], a[1], a[2], 0.0, gripper]).unwrap()
+}
+
 fn nalgebra_offset(x: f64, y: f64, z: f64) -> fairgrasp_env::sim::rapier3d::na::Vector3<f64> {
     fairgrasp_env::sim::rapier3d::na::Vector3::new(x, y, z)
 }
@@ -603,11 +615,7 @@ fn nalgebra_offset(x: f64, y: f64, z: f64) -> fairgrasp_env::sim::rapier3d::na::
 fn the_centre_term_costs_a_close_commanded_off_the_objects_centre() {
     let weight = 0.3;
     let run = |offset: f64| {
-        let mut env = env_with(|c| {
-            c.reward.kind = RewardKind::Staged;
-            c.reward.center = weight;
-            c.control.action_mode = ActionMode::Cartesian;
-        });
+        let mut env = staged_cartesian(|r| r.center = weight);
         env.reset(Some(5)).unwrap();
         let s = env.state().unwrap();
         let cube = s.objects[0].pose.translation.vector;
@@ -622,10 +630,7 @@ fn the_centre_term_costs_a_close_commanded_off_the_objects_centre() {
         let mut offsets = Vec::new();
         for (target, gripper, steps) in plan {
             for _ in 0..steps {
-                let tcp = env.state().unwrap().tcp.translation.vector;
-                let d = (target - tcp) / 0.02;
-                let a = [d.x, d.y, d.z].map(|v| (v as f32).clamp(-1.0, 1.0));
-                let step = env.step(&[a[0], a[1], a[2], 0.0, gripper]).unwrap();
+                let step = step_towards(&mut env, target, gripper);
                 costs.push(step.info.reward_terms.value("center"));
                 let s = env.state().unwrap();
                 offsets.push(s.tcp.rotation.inverse() * s.tcp_to_object(0));
