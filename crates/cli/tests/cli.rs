@@ -375,6 +375,7 @@ fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_the
         num_timesteps: 0,
         train_seed: 0,
         n_envs: 1,
+        privileged_dim: 0,
     };
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model");

@@ -115,6 +115,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
         num_timesteps: 4096,
         train_seed: 1,
         n_envs: 1,
+        privileged_dim: 0,
     };
     (meta, weights)
 }

@@ -48,6 +48,7 @@ fn tiny_model(dir: &Path) {
         num_timesteps: 0,
         train_seed: 1,
         n_envs: 1,
+        privileged_dim: 0,
     };
     save_model(dir, &ppo.weights().unwrap(), &meta).unwrap();
 }

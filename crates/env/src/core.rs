@@ -184,6 +184,11 @@ pub struct Info {
     pub extras: NamedValues,
     /// The reward split into its terms by name; they sum to the reward.
     pub reward_terms: NamedValues,
+    /// What only the simulator knows, for a critic (asymmetric actor-critic, Pinto et al.
+    /// 2018), never for the policy: [`Env::privileged_dim`] values, none when the environment
+    /// offers no privileged state.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub privileged: Vec<f32>,
 }
 
 /// The result of [`Env::step`].
@@ -225,6 +230,12 @@ pub trait Env: Send {
     /// Renders in the environment's render mode; `None` when it has none.
     fn render(&mut self) -> EnvResult<Option<Frame>>;
 
+    /// Values of [`Info::privileged`] at every reset and step; 0 when the environment offers
+    /// no privileged state.
+    fn privileged_dim(&self) -> usize {
+        0
+    }
+
     /// Releases resources. The environment must not be used afterwards.
     fn close(&mut self) {}
 }
@@ -259,6 +270,10 @@ impl<E: Env + ?Sized> Env for Box<E> {
 
     fn render(&mut self) -> EnvResult<Option<Frame>> {
         (**self).render()
+    }
+
+    fn privileged_dim(&self) -> usize {
+        (**self).privileged_dim()
     }
 
     fn close(&mut self) {

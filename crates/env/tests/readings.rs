@@ -72,3 +72,65 @@ fn readings_older_than_the_step_s_end_lag_the_true_joints() {
         "{behind} rad behind, {expected} expected"
     );
 }
+
+#[test]
+fn the_privileged_state_is_the_true_state_s_observation_and_the_policy_never_reads_it() {
+    // Per step: the policy's observation, `info.privileged`, and what it should be.
+    let run = |privileged: bool| {
+        let mut env = env_with(|c| {
+            c.readings.state_age_ms = [0.0, 15.0];
+            c.readings.privileged = privileged;
+            c.control.speed_scales = vec![0.25, 1.0];
+        });
+        let dim = env.observation_space().dim();
+        assert_eq!(env.privileged_dim(), if privileged { dim + 1 } else { 0 });
+        let mut steps = Vec::new();
+        for seed in [3, 4] {
+            let (obs, info) = env.reset(Some(seed)).unwrap();
+            let scale = info.extras.value("param/speed_scale");
+            let zeros = vec![0.0; env.action_space().dim()];
+            let mut want = env.observation_of(env.state().unwrap(), &zeros);
+            want.push(scale);
+            steps.push((obs, info.privileged, want));
+            let mut policy = ScriptedGraspPolicy::new(&env);
+            for _ in 0..40 {
+                let action = policy.act(&env);
+                let step = env.step(&action).unwrap();
+                let high = &env.action_space().high;
+                let normalised: Vec<f32> = action.iter().zip(high).map(|(a, h)| a / h).collect();
+                let mut want = env.observation_of(env.state().unwrap(), &normalised);
+                want.push(scale);
+                steps.push((step.obs, step.info.privileged, want));
+                if step.terminated || step.truncated {
+                    break;
+                }
+            }
+        }
+        steps
+    };
+    let (with, without) = (run(true), run(false));
+    // The policy's observations are the same bits with and without the privileged state.
+    let observations = |steps: &[(Vec<f32>, Vec<f32>, Vec<f32>)]| -> Vec<Vec<f32>> {
+        steps.iter().map(|s| s.0.clone()).collect()
+    };
+    assert_eq!(observations(&with), observations(&without));
+    assert!(
+        without
+            .iter()
+            .all(|(_, privileged, _)| privileged.is_empty())
+    );
+    for (i, (_, privileged, want)) in with.iter().enumerate() {
+        assert_eq!(privileged, want, "step {i}");
+    }
+    // Both speed scales were drawn, and the privileged state holds what the readings do not.
+    let scales: Vec<f32> = with.iter().map(|s| *s.1.last().unwrap()).collect();
+    assert!(
+        scales.contains(&0.25) && scales.contains(&1.0),
+        "{scales:?}"
+    );
+    let differing = with
+        .iter()
+        .filter(|(obs, p, _)| obs[..] != p[..obs.len()])
+        .count();
+    assert!(differing > with.len() / 2, "{differing} of {}", with.len());
+}

@@ -68,6 +68,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 &starts,
                 &out.values,
                 &out.log_probs,
+                &[],
             );
         }
         let t = Instant::now();

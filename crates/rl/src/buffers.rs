@@ -23,6 +23,10 @@ pub struct RolloutBuffer {
     pub log_probs: Vec<f32>,
     pub advantages: Vec<f32>,
     pub returns: Vec<f32>,
+    /// Values of the privileged state per transition (0: no privileged critic).
+    pub privileged_dim: usize,
+    /// Each observation's privileged state, as the value network read it.
+    pub privileged: Vec<f32>,
     len: usize,
 }
 
@@ -42,8 +46,17 @@ impl RolloutBuffer {
             log_probs: vec![0.0; n],
             advantages: vec![0.0; n],
             returns: vec![0.0; n],
+            privileged_dim: 0,
+            privileged: Vec::new(),
             len: 0,
         }
+    }
+
+    /// The buffer, also storing `dim` privileged values per transition.
+    pub fn with_privileged(mut self, dim: usize) -> Self {
+        self.privileged_dim = dim;
+        self.privileged = vec![0.0; self.n_steps * self.n_envs * dim];
+        self
     }
 
     /// Transitions stored so far (steps × envs).
@@ -63,7 +76,7 @@ impl RolloutBuffer {
         self.len = 0;
     }
 
-    /// Stores one step of every environment.
+    /// Stores one step of every environment (`privileged`: `n_envs × privileged_dim` values).
     #[allow(clippy::too_many_arguments)]
     pub fn push(
         &mut self,
@@ -73,9 +86,12 @@ impl RolloutBuffer {
         episode_starts: &[bool],
         values: &[f32],
         log_probs: &[f32],
+        privileged: &[f32],
     ) {
         assert!(!self.is_full(), "rollout buffer is full");
         let (n, t) = (self.n_envs, self.len);
+        let pd = self.privileged_dim;
+        self.privileged[t * n * pd..(t + 1) * n * pd].copy_from_slice(privileged);
         self.observations[t * n * self.obs_dim..(t + 1) * n * self.obs_dim]
             .copy_from_slice(observations);
         self.actions[t * n * self.act_dim..(t + 1) * n * self.act_dim].copy_from_slice(actions);
@@ -342,9 +358,9 @@ mod tests {
     fn gae_matches_a_hand_computation_across_an_episode_boundary() {
         // One env, 3 steps; an episode starts at step 2.
         let mut buf = RolloutBuffer::new(3, 1, 1, 1);
-        buf.push(&[0.0], &[0.0], &[1.0], &[true], &[0.5], &[0.0]);
-        buf.push(&[0.0], &[0.0], &[2.0], &[false], &[0.4], &[0.0]);
-        buf.push(&[0.0], &[0.0], &[3.0], &[true], &[0.3], &[0.0]);
+        buf.push(&[0.0], &[0.0], &[1.0], &[true], &[0.5], &[0.0], &[]);
+        buf.push(&[0.0], &[0.0], &[2.0], &[false], &[0.4], &[0.0], &[]);
+        buf.push(&[0.0], &[0.0], &[3.0], &[true], &[0.3], &[0.0], &[]);
         let (g, l) = (0.9f32, 0.8f32);
         buf.compute_returns_and_advantages(&[0.2], &[false], g, l);
         let d2 = 3.0 + g * 0.2 - 0.3;

@@ -51,6 +51,14 @@ pub struct ModelMeta {
     pub train_seed: u64,
     #[serde(default)]
     pub n_envs: usize,
+    /// Privileged values the value network reads after the observation (`ppo.privileged_critic`;
+    /// 0: none). The policy never reads them.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub privileged_dim: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl ModelMeta {

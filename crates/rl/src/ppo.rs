@@ -5,6 +5,10 @@
 //! for `n_epochs`, shuffle and split into minibatches of `batch_size`; minimise
 //! `−min(r·A, clip(r, 1±ε)·A) + c_v·(V − R)² − c_e·H` with the global gradient norm clipped;
 //! stop the epochs early when the approximate KL exceeds `target_kl`.
+//!
+//! With `privileged_critic` the value network also reads the environment's privileged state
+//! (asymmetric actor-critic, Pinto et al. 2018), normalised by running statistics as
+//! `VecNormalize` normalises observations; the policy reads the observation alone.
 
 use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
@@ -16,7 +20,7 @@ use crate::nn::{Activation, Adam};
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
 use candle_core::{DType, Device, Tensor};
-use fairgrasp_env::{VecStep, VectorEnv};
+use fairgrasp_env::{Info, RunningMeanStd, VecStep, VectorEnv};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -61,6 +65,11 @@ pub struct PpoConfig {
     pub log_std_init: f32,
     /// What the policy and value heads read (`kind = "flatten"`: the observation itself).
     pub features: FeaturesConfig,
+    /// The value network also reads the environment's privileged state (`info.privileged`:
+    /// for the arm tasks, `[readings] privileged = true`), which the policy never sees.
+    /// Written only when on, so that other models' files read as before.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub privileged_critic: bool,
 }
 
 impl Default for PpoConfig {
@@ -84,6 +93,7 @@ impl Default for PpoConfig {
             activation: Activation::Tanh,
             log_std_init: 0.0,
             features: FeaturesConfig::Flatten {},
+            privileged_critic: false,
         }
     }
 }
@@ -120,12 +130,95 @@ pub struct Ppo {
     pub written_out_loss: bool,
     fused: FusedPpoLoss,
     minibatch: MinibatchData,
+    /// With `privileged_critic`: each environment's privileged state and its statistics.
+    privileged: Option<PrivilegedState>,
+}
+
+/// The privileged critic's extra inputs: each environment's privileged state for its current
+/// observation, normalised by running statistics (clipped at ±10, VecNormalize's rule).
+struct PrivilegedState {
+    dim: usize,
+    /// `n_envs × dim`, normalised.
+    rows: Vec<f32>,
+    stats: RunningMeanStd,
+}
+
+impl PrivilegedState {
+    const CLIP: f64 = 10.0;
+    const EPSILON: f64 = 1e-8;
+
+    fn new(dim: usize) -> Self {
+        Self {
+            dim,
+            rows: Vec::new(),
+            stats: RunningMeanStd::new(dim),
+        }
+    }
+
+    /// `info`'s privileged state, checked.
+    fn of<'i>(&self, env: usize, info: &'i Info) -> Result<&'i [f32]> {
+        if info.privileged.len() != self.dim || info.privileged.iter().any(|v| !v.is_finite()) {
+            return Err(RlError::Other(format!(
+                "env {env}: the privileged critic needs {} finite privileged values per step \
+                 (info.privileged), got {:?}",
+                self.dim, info.privileged
+            )));
+        }
+        Ok(&info.privileged)
+    }
+
+    /// Normalises `raw` into `out` with the current statistics.
+    fn normalize_into(&self, raw: &[f32], out: &mut Vec<f32>) {
+        let (mean, var) = (self.stats.mean(), self.stats.var());
+        out.extend(raw.iter().zip(mean.iter().zip(var)).map(|(&x, (&m, &v))| {
+            ((x as f64 - m) / (v + Self::EPSILON).sqrt()).clamp(-Self::CLIP, Self::CLIP) as f32
+        }));
+    }
+
+    /// Takes each environment's current privileged state (from `infos`), updating the
+    /// statistics with them first.
+    fn set_rows<'i>(&mut self, infos: impl Iterator<Item = &'i Info>) -> Result<()> {
+        let mut raw = Vec::new();
+        for (env, info) in infos.enumerate() {
+            raw.extend_from_slice(self.of(env, info)?);
+        }
+        self.stats.update(&raw);
+        self.rows.clear();
+        for row in raw.chunks_exact(self.dim) {
+            let mut out = std::mem::take(&mut self.rows);
+            self.normalize_into(row, &mut out);
+            self.rows = out;
+        }
+        Ok(())
+    }
+
+    /// The rows after `step`: the step's own for running episodes, the reset's for those that
+    /// ended.
+    fn advance(&mut self, step: &VecStep<'_>) -> Result<()> {
+        let current = step
+            .infos
+            .iter()
+            .zip(step.episode_ends)
+            .map(|(info, end)| end.as_ref().map_or(info, |end| &end.reset_info));
+        self.set_rows(current)
+    }
+
+    /// `obs` rows each followed by the privileged row of `privileged`, into `out`.
+    fn join(obs: &[f32], obs_dim: usize, privileged: &[f32], dim: usize, out: &mut Vec<f32>) {
+        out.clear();
+        for (o, p) in obs.chunks_exact(obs_dim).zip(privileged.chunks_exact(dim)) {
+            out.extend_from_slice(o);
+            out.extend_from_slice(p);
+        }
+    }
 }
 
 /// One minibatch gathered from the rollout buffer, row-major.
 #[derive(Default)]
 struct MinibatchData {
     observations: Vec<f32>,
+    /// Observations joined with their privileged states (privileged critic only).
+    critic_inputs: Vec<f32>,
     actions: Vec<f32>,
     log_probs: Vec<f32>,
     advantages: Vec<f32>,
@@ -134,8 +227,9 @@ struct MinibatchData {
 
 impl MinibatchData {
     fn gather(&mut self, b: &RolloutBuffer, indices: &[u32]) {
-        let (od, ad) = (b.obs_dim, b.act_dim);
+        let (od, ad, pd) = (b.obs_dim, b.act_dim, b.privileged_dim);
         self.observations.clear();
+        self.critic_inputs.clear();
         self.actions.clear();
         self.log_probs.clear();
         self.advantages.clear();
@@ -144,6 +238,12 @@ impl MinibatchData {
             let i = i as usize;
             self.observations
                 .extend_from_slice(&b.observations[i * od..(i + 1) * od]);
+            if pd > 0 {
+                self.critic_inputs
+                    .extend_from_slice(&b.observations[i * od..(i + 1) * od]);
+                self.critic_inputs
+                    .extend_from_slice(&b.privileged[i * pd..(i + 1) * pd]);
+            }
             self.actions
                 .extend_from_slice(&b.actions[i * ad..(i + 1) * ad]);
             self.log_probs.push(b.log_probs[i]);
@@ -153,8 +253,13 @@ impl MinibatchData {
     }
 
     fn as_minibatch(&self) -> Minibatch<'_> {
+        let value_inputs = match self.critic_inputs.is_empty() {
+            true => &self.observations,
+            false => &self.critic_inputs,
+        };
         Minibatch {
             observations: &self.observations,
+            value_inputs,
             actions: &self.actions,
             old_log_probs: &self.log_probs,
             advantages: &self.advantages,
@@ -171,12 +276,40 @@ impl Ppo {
         n_envs: usize,
         seed: u64,
     ) -> Result<Self> {
+        Self::with_privileged(config, obs_dim, act_dim, 0, n_envs, seed)
+    }
+
+    /// [`Self::new`] for environments that report `privileged_dim` privileged values
+    /// ([`VectorEnv::privileged_dim`]); the value network reads them when the configuration's
+    /// `privileged_critic` is on.
+    pub fn with_privileged(
+        config: PpoConfig,
+        obs_dim: usize,
+        act_dim: usize,
+        privileged_dim: usize,
+        n_envs: usize,
+        seed: u64,
+    ) -> Result<Self> {
         validate(&config, n_envs)?;
+        let privileged_dim = match (config.privileged_critic, privileged_dim) {
+            (false, _) => 0,
+            (true, 0) => {
+                return Err(RlError::Config {
+                    key: "ppo.privileged_critic".into(),
+                    problem: "the environment reports no privileged state (for the arm tasks: \
+                              set [env.readings] privileged = true)"
+                        .into(),
+                });
+            }
+            (true, dim) => dim,
+        };
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let policy = ActorCritic::new(obs_dim, act_dim, &config, &mut rng)?;
+        let policy = ActorCritic::new(obs_dim, act_dim, privileged_dim, &config, &mut rng)?;
         let optimizer = Adam::new(&policy.varmap, config.learning_rate)?;
+        let buffer = RolloutBuffer::new(config.n_steps, n_envs, obs_dim, act_dim)
+            .with_privileged(privileged_dim);
         Ok(Self {
-            buffer: RolloutBuffer::new(config.n_steps, n_envs, obs_dim, act_dim),
+            buffer,
             rng,
             config,
             policy,
@@ -186,6 +319,7 @@ impl Ppo {
             written_out_loss: true,
             fused: FusedPpoLoss::default(),
             minibatch: MinibatchData::default(),
+            privileged: (privileged_dim > 0).then(|| PrivilegedState::new(privileged_dim)),
         })
     }
 
@@ -203,17 +337,28 @@ impl Ppo {
         on_step: &mut dyn FnMut(&VecStep<'_>),
     ) -> Result<()> {
         let space = venv.action_space().clone();
-        let n = venv.num_envs();
+        let (n, od) = (venv.num_envs(), venv.obs_dim());
         if self.episode_starts.len() != n {
             // A fresh learner (or one resumed onto freshly reset environments).
             self.episode_starts = vec![true; n];
+            if let Some(p) = self.privileged.as_mut() {
+                p.set_rows(venv.reset_infos().iter())?;
+            }
         }
         let episode_starts = &mut self.episode_starts;
         self.buffer.clear();
         let mut obs = venv.observations().to_vec();
         let mut clipped = vec![0.0; n * space.dim()];
+        let (mut critic_obs, mut terminal) = (Vec::new(), Vec::new());
         while !self.buffer.is_full() {
-            let out = self.policy.act(&obs, false, &mut self.rng)?;
+            let critic = match &self.privileged {
+                Some(p) => {
+                    PrivilegedState::join(&obs, od, &p.rows, p.dim, &mut critic_obs);
+                    Some(critic_obs.as_slice())
+                }
+                None => None,
+            };
+            let out = (self.policy).act_with_critic(&obs, critic, false, &mut self.rng)?;
             clipped.copy_from_slice(&out.actions);
             for row in clipped.chunks_mut(space.dim()) {
                 space.clip(row);
@@ -224,10 +369,20 @@ impl Ppo {
             // Bootstrap truncated episodes from their real final observation.
             for (i, end) in step.episode_ends.iter().enumerate() {
                 if let (Some(end), true) = (end, step.truncated[i]) {
-                    let v = self.policy.values(&end.terminal_observation)?[0];
+                    let v = match &self.privileged {
+                        Some(p) => {
+                            let mut last = Vec::new();
+                            p.normalize_into(p.of(i, &step.infos[i])?, &mut last);
+                            let (o, d) = (&end.terminal_observation, p.dim);
+                            PrivilegedState::join(o, od, &last, d, &mut terminal);
+                            self.policy.values(&terminal)?[0]
+                        }
+                        None => self.policy.values(&end.terminal_observation)?[0],
+                    };
                     rewards[i] += self.config.gamma * v;
                 }
             }
+            let privileged = self.privileged.as_ref().map_or(&[][..], |p| &p.rows);
             self.buffer.push(
                 &obs,
                 &out.actions,
@@ -235,14 +390,24 @@ impl Ppo {
                 episode_starts,
                 &out.values,
                 &out.log_probs,
+                privileged,
             );
+            if let Some(p) = self.privileged.as_mut() {
+                p.advance(&step)?;
+            }
             obs.copy_from_slice(step.observations);
             for (i, start) in episode_starts.iter_mut().enumerate() {
                 *start = step.terminated[i] || step.truncated[i];
             }
             self.num_timesteps += n as u64;
         }
-        let last_values = self.policy.values(&obs)?;
+        let last_values = match &self.privileged {
+            Some(p) => {
+                PrivilegedState::join(&obs, od, &p.rows, p.dim, &mut critic_obs);
+                self.policy.values(&critic_obs)?
+            }
+            None => self.policy.values(&obs)?,
+        };
         self.buffer.compute_returns_and_advantages(
             &last_values,
             episode_starts,
@@ -269,6 +434,13 @@ impl Ppo {
             (total, b.obs_dim),
             &dev,
         )?;
+        let privileged_all = match b.privileged_dim {
+            0 => None,
+            pd => {
+                let p = Tensor::from_slice(&b.privileged[..total * pd], (total, pd), &dev)?;
+                Some(Tensor::cat(&[&obs_all, &p], 1)?)
+            }
+        };
         let act_all =
             Tensor::from_slice(&b.actions[..total * b.act_dim], (total, b.act_dim), &dev)?;
         let logp_all = Tensor::from_slice(&b.log_probs[..total], total, &dev)?;
@@ -326,7 +498,11 @@ impl Ppo {
                 let returns = ret_all.index_select(&idx, 0)?;
 
                 // log π(a|s) and V(s) of the current policy.
-                let (dist, values) = self.policy.forward(&obs)?;
+                let critic_obs = match &privileged_all {
+                    Some(all) => Some(all.index_select(&idx, 0)?),
+                    None => None,
+                };
+                let (dist, values) = self.policy.forward(&obs, critic_obs.as_ref())?;
                 let logp = dist.log_prob(&actions)?;
                 let log_ratio = (&logp - &old_logp)?;
                 let ratio = log_ratio.exp()?;
@@ -445,12 +621,39 @@ impl Algorithm for Ppo {
     fn training_state(&self) -> Result<TensorMap> {
         let mut state = self.optimizer.state()?;
         state.extend(rng_state(&self.rng, "ppo.")?);
+        if let Some(p) = &self.privileged {
+            let dev = Device::Cpu;
+            let stats = &p.stats;
+            state.insert(PRIVILEGED_MEAN.into(), Tensor::new(stats.mean(), &dev)?);
+            state.insert(PRIVILEGED_VAR.into(), Tensor::new(stats.var(), &dev)?);
+            state.insert(
+                PRIVILEGED_COUNT.into(),
+                Tensor::new(&[stats.count()], &dev)?,
+            );
+        }
         Ok(state)
     }
 
     fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
         self.optimizer.load_state(state).map_err(RlError::Model)?;
         self.rng = rng_from_state(state, "ppo.")?;
+        if let Some(p) = self.privileged.as_mut() {
+            let get = |key: &str| -> Result<Vec<f64>> {
+                let t = state
+                    .get(key)
+                    .ok_or_else(|| RlError::Model(format!("the training state lacks `{key}`")))?;
+                t.to_vec1::<f64>()
+                    .map_err(|e| RlError::Model(format!("`{key}`: {e}")))
+            };
+            let count = get(PRIVILEGED_COUNT)?.first().copied().unwrap_or(f64::NAN);
+            p.stats =
+                RunningMeanStd::from_parts(get(PRIVILEGED_MEAN)?, get(PRIVILEGED_VAR)?, count)
+                    .and_then(|s| match s.dim() == p.dim {
+                        true => Ok(s),
+                        false => Err(format!("{} values, the critic reads {}", s.dim(), p.dim)),
+                    })
+                    .map_err(|e| RlError::Model(format!("privileged-state statistics: {e}")))?;
+        }
         Ok(())
     }
 
@@ -458,6 +661,11 @@ impl Algorithm for Ppo {
         &mut self.rng
     }
 }
+
+/// Training-state names of the privileged critic's running statistics.
+const PRIVILEGED_MEAN: &str = "ppo.privileged.mean";
+const PRIVILEGED_VAR: &str = "ppo.privileged.var";
+const PRIVILEGED_COUNT: &str = "ppo.privileged.count";
 
 /// `1 − Var(returns − values) / Var(returns)`: how much of the return the value function explains.
 pub fn explained_variance(values: &[f32], returns: &[f32]) -> f32 {

@@ -406,10 +406,11 @@ fn dispatch(
     let (obs_dim, act_dim) = (venv.obs_dim(), venv.act_dim());
     match config.algo {
         Algo::Ppo => {
-            let mut ppo = Ppo::new(
+            let mut ppo = Ppo::with_privileged(
                 config.ppo.clone(),
                 obs_dim,
                 act_dim,
+                venv.privileged_dim(),
                 config.n_envs,
                 config.seed,
             )?;
@@ -491,6 +492,10 @@ fn run<A: Algorithm>(
     let mut tb = TensorBoardWriter::create(&run_dir.join("tb")).map_err(io)?;
 
     let env_json = serde_json::to_value(&config.env).map_err(|e| RlError::Other(e.to_string()))?;
+    let privileged_dim = match config.algo == Algo::Ppo && config.ppo.privileged_critic {
+        true => venv.privileged_dim(),
+        false => 0,
+    };
     let meta = |algo: &A, venv: &VecNormalize<_>| ModelMeta {
         format_version: crate::model::FORMAT_VERSION,
         algo: algo.name().into(),
@@ -505,6 +510,7 @@ fn run<A: Algorithm>(
         num_timesteps: algo.num_timesteps(),
         train_seed: config.seed,
         n_envs: config.n_envs,
+        privileged_dim,
     };
 
     let started = Instant::now();

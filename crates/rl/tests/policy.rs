@@ -34,6 +34,7 @@ fn meta<V: VectorEnv>(
         num_timesteps: steps,
         train_seed: 1,
         n_envs: venv.num_envs(),
+        privileged_dim: 0,
     }
 }
 

@@ -9,6 +9,16 @@ use std::path::Path;
 
 /// A tiny PPO run: 2 envs × 128 steps per iteration, 4 minibatches × 2 epochs per update.
 fn tiny_config(total: u64) -> TrainConfig {
+    tiny_config_with(total, &[]).unwrap()
+}
+
+/// [`tiny_config`] with more `key=value` overrides.
+fn tiny_config_with(total: u64, overrides: &[&str]) -> fairgrasp_rl::error::Result<TrainConfig> {
+    let overrides: Vec<String> = ["env.reward.kind=staged"]
+        .iter()
+        .chain(overrides)
+        .map(|o| o.to_string())
+        .collect();
     TrainConfig::from_toml_str(
         &format!(
             "total_timesteps = {total}\nn_envs = 2\nthreads = 1\ncheckpoint_freq = 512\n\
@@ -16,9 +26,8 @@ fn tiny_config(total: u64) -> TrainConfig {
              [ppo]\nn_steps = 128\nbatch_size = 64\nn_epochs = 2\n\
              [env.task]\nmax_episode_steps = 20\n"
         ),
-        &["env.reward.kind=staged".into()],
+        &overrides,
     )
-    .unwrap()
 }
 
 /// The optimiser's step counter stored in a checkpoint.
@@ -423,4 +432,42 @@ fn a_threshold_stop_waits_for_its_confirmation_on_validation_seeds() {
     assert!(!ran_on.reached_threshold);
     assert_eq!(ran_on.num_timesteps, 2048);
     assert_eq!(confirmations, 4);
+}
+
+#[test]
+fn a_privileged_critic_trains_saves_and_resumes_and_the_policy_reads_the_observation_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path();
+    let privileged = [
+        "env.readings.enabled=true",
+        "env.readings.privileged=true",
+        "ppo.privileged_critic=true",
+    ];
+    train(&tiny_config_with(1024, &privileged).unwrap(), run, |_| {}).unwrap();
+    let mut model = Policy::load(run).unwrap();
+    let (obs_dim, privileged_dim) = (model.obs_dim(), model.meta().privileged_dim);
+    assert_eq!(privileged_dim, obs_dim + 1);
+    let weights = load_tensors(&run.join("best/model.safetensors")).unwrap();
+    assert_eq!(weights["pi.l0.weight"].dims()[1], obs_dim);
+    assert_eq!(weights["vf.l0.weight"].dims()[1], obs_dim + privileged_dim);
+    let action = model.act(&vec![0.0; obs_dim], true).unwrap();
+    assert_eq!(action.len(), model.act_dim());
+
+    // The critic's running statistics are part of the training state, and a resume goes on.
+    let state =
+        load_tensors(&run.join("checkpoints/step_1024/training_state.safetensors")).unwrap();
+    let count = state["ppo.privileged.count"].to_vec1::<f64>().unwrap()[0];
+    assert!(count > 1024.0, "{count}");
+    assert_eq!(state["ppo.privileged.mean"].dims(), [privileged_dim]);
+    let summary = resume(run, &["total_timesteps=1536".into()], |_| {}).unwrap();
+    assert_eq!(summary.num_timesteps, 1536);
+
+    // A privileged critic on an environment that reports no privileged state is refused.
+    let other = dir.path().join("refused");
+    let config = tiny_config_with(512, &["ppo.privileged_critic=true"]).unwrap();
+    let err = train(&config, &other, |_| {}).err().unwrap().to_string();
+    assert!(
+        err.contains("ppo.privileged_critic") && err.contains("privileged = true"),
+        "{err}"
+    );
 }

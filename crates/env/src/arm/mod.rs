@@ -132,6 +132,8 @@ struct Episode {
     /// which the policy and the action mapping see.
     estimator: Option<StateEstimator>,
     observed: Option<ArmState>,
+    /// The last step's [`Info::privileged`] (`readings.privileged`).
+    privileged: Vec<f32>,
 }
 
 impl Episode {
@@ -457,6 +459,17 @@ impl<T: Task> ArmEnv<T> {
         estimator.estimate(&self.facts, &reading, pose, gripper_closing, dt)
     }
 
+    /// [`Info::privileged`] for the true `state` (see [`ReadingsConfig::privileged`]); empty
+    /// when it is off.
+    fn privileged(&self, state: &ArmState, previous_action: &[f32], speed_scale: f32) -> Vec<f32> {
+        if !self.config.readings.privileged {
+            return Vec::new();
+        }
+        let mut values = self.observation_of(state, previous_action);
+        values.push(speed_scale);
+        values
+    }
+
     fn no_op_action(&self) -> Vec<f32> {
         let mut a = vec![0.0; self.action_space.dim()];
         *a.last_mut().expect("action has a gripper entry") = 1.0;
@@ -493,6 +506,7 @@ impl<T: Task> ArmEnv<T> {
             info: Info {
                 elapsed_steps: episode.steps,
                 events: vec![EpisodeEvent::NonFiniteState],
+                privileged: episode.privileged.clone(),
                 ..Info::default()
             },
         }
@@ -532,6 +546,13 @@ impl<T: Task> Env for ArmEnv<T> {
 
     fn observation_space(&self) -> &BoxSpace {
         &self.observation_space
+    }
+
+    fn privileged_dim(&self) -> usize {
+        match self.config.readings.privileged {
+            true => self.observation_space.dim() + 1,
+            false => 0,
+        }
     }
 
     fn action_space(&self) -> &BoxSpace {
@@ -580,6 +601,7 @@ impl<T: Task> Env for ArmEnv<T> {
         let command = self.mapper.hold(view, targets);
         let previous_action = vec![0.0; self.action_space.dim()];
         let obs = self.observe(view, &previous_action);
+        let privileged = self.privileged(&state, &previous_action, speed_scale);
         let no_op = self.no_op_action();
         let ramp = self.config.control.servo.ramp(&self.scene, speed_scale);
         let gripper = (self.config.control.gripper).drive(&self.scene, speed_scale, &mut self.rng);
@@ -598,11 +620,13 @@ impl<T: Task> Env for ArmEnv<T> {
             substeps,
             estimator,
             observed,
+            privileged: privileged.clone(),
         });
         Ok((
             obs,
             Info {
                 extras: params,
+                privileged,
                 ..Info::default()
             },
         ))
@@ -716,6 +740,7 @@ impl<T: Task> Env for ArmEnv<T> {
         if obs.iter().any(|v| !v.is_finite()) {
             return Ok(self.non_finite_step());
         }
+        let privileged = self.privileged(&state, &normalised, speed_scale);
         let evaluation = self.task.evaluate(&self.scene, &state);
         let max_steps = self.config.task.max_episode_steps();
         let episode = self.episode.as_mut().expect("checked");
@@ -730,6 +755,7 @@ impl<T: Task> Env for ArmEnv<T> {
         episode.reported = reported;
         episode.estimator = estimator;
         episode.observed = observed;
+        episode.privileged.clone_from(&privileged);
         events.extend(evaluation.failure);
         Ok(Step {
             obs,
@@ -742,6 +768,7 @@ impl<T: Task> Env for ArmEnv<T> {
                 events,
                 extras: evaluation.extras,
                 reward_terms,
+                privileged,
             },
         })
     }

@@ -35,6 +35,11 @@ pub struct ReadingsConfig {
     /// and the drives' own delay. At speed scale s they are s times as long in the policy's
     /// time, as on the arm. `[0, 0]`: read at the step's end.
     pub state_age_ms: [f32; 2],
+    /// Report, in `info.privileged`, what only the simulator knows, for an asymmetric critic
+    /// (`ppo.privileged_critic`): the task's observation of the true state (true contacts,
+    /// velocities and object pose, no noise, no age) and the episode's speed scale. The
+    /// policy never reads it.
+    pub privileged: bool,
 }
 
 impl Default for ReadingsConfig {
@@ -44,6 +49,7 @@ impl Default for ReadingsConfig {
             enabled: false,
             object_feed_hz: 30.0,
             state_age_ms: [0.0, 0.0],
+            privileged: false,
         }
     }
 }

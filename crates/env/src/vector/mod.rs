@@ -118,6 +118,11 @@ pub trait VectorEnv {
         self.action_space().dim()
     }
 
+    /// Values of each environment's [`Info::privileged`] (0: none offered).
+    fn privileged_dim(&self) -> usize {
+        0
+    }
+
     /// Resets every environment: `Some(seed)` resets environment `i` with `seed + i`
     /// (wrapping), `None` continues each environment's random stream. Returns the
     /// `num_envs × obs_dim` first observations.
@@ -611,6 +616,12 @@ impl<E: Env> VectorEnv for VecEnv<E> {
         self.reset_infos[index] = info;
         self.episode_ends[index] = None;
         Ok(row)
+    }
+
+    fn privileged_dim(&self) -> usize {
+        self.slots
+            .first()
+            .map_or(0, |slot| slot.env.privileged_dim())
     }
 
     fn reset_infos(&self) -> &[Info] {

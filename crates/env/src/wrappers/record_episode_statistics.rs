@@ -177,6 +177,10 @@ impl<E: Env> Env for RecordEpisodeStatistics<E> {
         self.env.render()
     }
 
+    fn privileged_dim(&self) -> usize {
+        self.env.privileged_dim()
+    }
+
     fn close(&mut self) {
         self.env.close()
     }

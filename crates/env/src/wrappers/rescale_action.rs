@@ -148,6 +148,10 @@ impl<E: Env> Env for RescaleAction<E> {
         self.env.render()
     }
 
+    fn privileged_dim(&self) -> usize {
+        self.env.privileged_dim()
+    }
+
     fn close(&mut self) {
         self.env.close()
     }

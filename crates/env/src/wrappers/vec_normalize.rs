@@ -527,6 +527,10 @@ impl<V: VectorEnv> VectorEnv for VecNormalize<V> {
         Ok(&self.obs[range])
     }
 
+    fn privileged_dim(&self) -> usize {
+        self.venv.privileged_dim()
+    }
+
     fn reset_infos(&self) -> &[Info] {
         self.venv.reset_infos()
     }

@@ -41,6 +41,9 @@ pub struct MinibatchStats {
 /// One minibatch's samples, row-major.
 pub struct Minibatch<'a> {
     pub observations: &'a [f32],
+    /// What the value head reads: the observations, or with a privileged critic each
+    /// observation followed by its privileged state.
+    pub value_inputs: &'a [f32],
     pub actions: &'a [f32],
     pub old_log_probs: &'a [f32],
     /// Advantages as stored (normalised here when the configuration says so).
@@ -221,7 +224,7 @@ impl ValuePart {
     fn compute(&mut self, layers: &[LayerParams<'_>], batch: &Minibatch<'_>, vf_coef: f32) -> f32 {
         let n = batch.returns.len();
         let inv_n = (1.0 / n as f64) as f32;
-        mlp::forward(layers, batch.observations, n, &mut self.vf);
+        mlp::forward(layers, batch.value_inputs, n, &mut self.vf);
         let state_values = self.vf.outputs.last().expect("vf has layers");
         self.grad_values.clear();
         self.grad_values.extend(
@@ -243,7 +246,7 @@ impl ValuePart {
         self.vf_grads.resize_with(layers.len(), Default::default);
         mlp::backward(
             layers,
-            batch.observations,
+            batch.value_inputs,
             n,
             &self.grad_values,
             &mut self.vf,
@@ -423,16 +426,29 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// A learner with a synthetic rollout (the same for the same seeds).
+    /// A learner with a synthetic rollout (the same for the same seeds); with a privileged
+    /// critic, 4 privileged values per observation.
     fn learner(config: &PpoConfig, written_out: bool) -> Ppo {
         let (obs_dim, act_dim, n_envs) = (5, 3, 2);
-        let mut ppo = Ppo::new(config.clone(), obs_dim, act_dim, n_envs, 4).unwrap();
+        let pd = if config.privileged_critic { 4 } else { 0 };
+        let mut ppo =
+            Ppo::with_privileged(config.clone(), obs_dim, act_dim, pd, n_envs, 4).unwrap();
         ppo.written_out_loss = written_out;
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let mut obs = vec![0.0f32; n_envs * obs_dim];
+        let mut privileged = vec![0.0f32; n_envs * pd];
         while !ppo.buffer.is_full() {
             obs.iter_mut().for_each(|v| *v = standard_normal(&mut rng));
-            let out = ppo.policy.act(&obs, false, &mut ppo.rng).unwrap();
+            privileged
+                .iter_mut()
+                .for_each(|v| *v = standard_normal(&mut rng));
+            let critic_obs: Vec<f32> = (obs.chunks(obs_dim).zip(privileged.chunks(pd.max(1))))
+                .flat_map(|(o, p)| o.iter().chain(&p[..pd]).copied())
+                .collect();
+            let critic = (pd > 0).then_some(critic_obs.as_slice());
+            let out = (ppo.policy)
+                .act_with_critic(&obs, critic, false, &mut ppo.rng)
+                .unwrap();
             let rewards: Vec<f32> = (0..n_envs).map(|_| rng.random::<f32>()).collect();
             let starts: Vec<bool> = (0..n_envs).map(|_| rng.random::<f32>() < 0.1).collect();
             ppo.buffer.push(
@@ -442,6 +458,7 @@ mod tests {
                 &starts,
                 &out.values,
                 &out.log_probs,
+                &privileged,
             );
         }
         ppo.buffer
@@ -469,6 +486,10 @@ mod tests {
                 normalize_advantage: false,
                 max_grad_norm: 100.0,
                 clip_range: 0.05,
+                ..base.clone()
+            },
+            PpoConfig {
+                privileged_critic: true,
                 ..base.clone()
             },
         ];

@@ -1,5 +1,11 @@
 //! PPO's policy (SB3's `ActorCriticPolicy`): a feature extractor shared by a Gaussian policy
 //! head `pi` (state-independent log std) and a value head `vf`.
+//!
+//! With a privileged critic (asymmetric actor-critic, Pinto et al. 2018) the value head reads
+//! the observation followed by the environment's privileged state ([`Info::privileged`]), which
+//! the policy head never sees: only `pi` and `log_std` act, on the arm as in training.
+//!
+//! [`Info::privileged`]: fairgrasp_env::Info::privileged
 
 use crate::distributions::{DiagGaussian, log_prob_term, standard_normal_tensor};
 use crate::error::{Result, RlError};
@@ -27,6 +33,9 @@ pub struct ActorCritic {
     log_std: Var,
     pub obs_dim: usize,
     pub act_dim: usize,
+    /// Privileged values the value head reads after the observation (0: it reads the
+    /// observation's features only).
+    pub privileged_dim: usize,
     device: Device,
     /// Whether acting runs the networks written out ([`crate::kernels::mlp`]: tanh layers on flat
     /// observations) instead of through candle tensors.
@@ -47,10 +56,11 @@ impl ActorCritic {
     pub fn new(
         obs_dim: usize,
         act_dim: usize,
+        privileged_dim: usize,
         config: &PpoConfig,
         rng: &mut impl Rng,
     ) -> Result<Self> {
-        let policy = Self::zeroed(obs_dim, act_dim, config)?;
+        let policy = Self::zeroed(obs_dim, act_dim, privileged_dim, config)?;
         policy.features.init_weights(&policy.varmap, rng)?;
         policy.pi.init_weights(&policy.varmap, rng)?;
         policy.vf.init_weights(&policy.varmap, rng)?;
@@ -58,7 +68,17 @@ impl ActorCritic {
     }
 
     /// The networks with zero weights (`log_std` at its initial value), to load weights into.
-    pub fn zeroed(obs_dim: usize, act_dim: usize, config: &PpoConfig) -> Result<Self> {
+    pub fn zeroed(
+        obs_dim: usize,
+        act_dim: usize,
+        privileged_dim: usize,
+        config: &PpoConfig,
+    ) -> Result<Self> {
+        if privileged_dim > 0 && config.features != (FeaturesConfig::Flatten {}) {
+            return Err(RlError::Other(
+                "a privileged critic reads flat observations (features.kind = \"flatten\")".into(),
+            ));
+        }
         let device = Device::Cpu;
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &device);
@@ -66,7 +86,8 @@ impl ActorCritic {
         let (arch, activation) = (&config.net_arch, config.activation);
         let dim = features.features_dim();
         let pi = Mlp::new(&vb.pp("pi"), dim, arch, act_dim, activation, PI_OUTPUT_GAIN)?;
-        let vf = Mlp::new(&vb.pp("vf"), dim, arch, 1, activation, VF_OUTPUT_GAIN)?;
+        let vf_in = dim + privileged_dim;
+        let vf = Mlp::new(&vb.pp("vf"), vf_in, arch, 1, activation, VF_OUTPUT_GAIN)?;
         vb.get_with_hints(
             act_dim,
             "log_std",
@@ -87,6 +108,7 @@ impl ActorCritic {
             log_std,
             obs_dim,
             act_dim,
+            privileged_dim,
             device,
             written_out: config.activation == Activation::Tanh
                 && config.features == FeaturesConfig::Flatten {},
@@ -121,20 +143,47 @@ impl ActorCritic {
         )?)
     }
 
-    /// The action distribution and the state values (`batch`), from one feature pass.
-    pub fn forward(&self, obs: &Tensor) -> Result<(DiagGaussian, Tensor)> {
+    /// The action distribution and the state values (`batch`), from one feature pass; the
+    /// values from `critic_obs` (`batch × critic_dim`) with a privileged critic.
+    pub fn forward(
+        &self,
+        obs: &Tensor,
+        critic_obs: Option<&Tensor>,
+    ) -> Result<(DiagGaussian, Tensor)> {
         let features = self.features.forward(obs)?;
-        let values = self.vf.forward(&features)?.squeeze(1)?;
-        Ok((self.distribution_from_features(&features)?, values))
+        let values = match (self.privileged_dim, critic_obs) {
+            (0, _) => self.vf.forward(&features)?,
+            (_, Some(critic_obs)) => self.vf.forward(critic_obs)?,
+            (_, None) => return Err(self.no_critic_obs()),
+        };
+        Ok((
+            self.distribution_from_features(&features)?,
+            values.squeeze(1)?,
+        ))
     }
 
-    /// State values for a batch of observations.
-    pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        if self.written_out {
-            let rows = self.rows(obs)?;
-            return Ok(mlp::forward_mlp(&self.vf, obs, rows)?);
+    /// Values per row of the value head's input: the observation, followed by the privileged
+    /// state with a privileged critic.
+    pub fn critic_dim(&self) -> usize {
+        self.obs_dim + self.privileged_dim
+    }
+
+    fn no_critic_obs(&self) -> RlError {
+        RlError::Other(format!(
+            "the privileged critic reads {} values per row (observation and privileged state); \
+             none were given",
+            self.critic_dim()
+        ))
+    }
+
+    /// State values for a batch of the value head's inputs (rows of [`Self::critic_dim`]:
+    /// observations, or observations and privileged states).
+    pub fn values(&self, critic_obs: &[f32]) -> Result<Vec<f32>> {
+        if self.written_out || self.privileged_dim > 0 {
+            let rows = rows_of(critic_obs, self.critic_dim())?;
+            return Ok(mlp::forward_mlp(&self.vf, critic_obs, rows)?);
         }
-        let features = self.features.forward(&self.obs_tensor(obs)?)?;
+        let features = self.features.forward(&self.obs_tensor(critic_obs)?)?;
         Ok(self.vf.forward(&features)?.flatten_all()?.to_vec1()?)
     }
 
@@ -147,6 +196,21 @@ impl ActorCritic {
         deterministic: bool,
         rng: &mut impl Rng,
     ) -> Result<PolicyOutput> {
+        self.act_with_critic(obs, None, deterministic, rng)
+    }
+
+    /// [`Self::act`], the values read from `critic_obs` (rows of [`Self::critic_dim`]) where
+    /// given; a privileged critic needs them.
+    pub fn act_with_critic(
+        &self,
+        obs: &[f32],
+        critic_obs: Option<&[f32]>,
+        deterministic: bool,
+        rng: &mut impl Rng,
+    ) -> Result<PolicyOutput> {
+        if self.privileged_dim > 0 && critic_obs.is_none() {
+            return Err(self.no_critic_obs());
+        }
         if self.written_out {
             let rows = self.rows(obs)?;
             let (actions, means, log_std) =
@@ -169,10 +233,14 @@ impl ActorCritic {
             return Ok(PolicyOutput {
                 log_probs,
                 actions,
-                values: mlp::forward_mlp(&self.vf, obs, rows)?,
+                values: self.values(critic_obs.unwrap_or(obs))?,
             });
         }
-        let (dist, values) = self.forward(&self.obs_tensor(obs)?)?;
+        let critic_obs = match critic_obs {
+            Some(rows) => Some(obs_tensor(rows, self.critic_dim(), &self.device)?),
+            None => None,
+        };
+        let (dist, values) = self.forward(&self.obs_tensor(obs)?, critic_obs.as_ref())?;
         let actions = self.actions(&dist, deterministic, rng)?;
         Ok(PolicyOutput {
             log_probs: dist.log_prob(&actions)?.to_vec1()?,
@@ -202,14 +270,7 @@ impl ActorCritic {
 
     /// Rows of whole observations in `obs`.
     fn rows(&self, obs: &[f32]) -> Result<usize> {
-        if obs.is_empty() || !obs.len().is_multiple_of(self.obs_dim) {
-            return Err(RlError::Other(format!(
-                "{} observation values are not rows of {}",
-                obs.len(),
-                self.obs_dim
-            )));
-        }
-        Ok(obs.len() / self.obs_dim)
+        rows_of(obs, self.obs_dim)
     }
 
     /// [`Self::actions`] with the networks written out: `(actions, means, log σ)`, with
@@ -250,6 +311,17 @@ impl ActorCritic {
     }
 }
 
+/// Rows of `dim` values in `values`; errors unless it holds whole rows.
+fn rows_of(values: &[f32], dim: usize) -> Result<usize> {
+    if values.is_empty() || dim == 0 || !values.len().is_multiple_of(dim) {
+        return Err(RlError::Other(format!(
+            "{} observation values are not rows of {dim}",
+            values.len(),
+        )));
+    }
+    Ok(values.len() / dim)
+}
+
 /// `obs` as a `batch × obs_dim` tensor; errors unless it holds whole observations.
 pub(crate) fn obs_tensor(obs: &[f32], obs_dim: usize, device: &Device) -> Result<Tensor> {
     if obs.is_empty() || obs_dim == 0 || !obs.len().is_multiple_of(obs_dim) {
@@ -283,7 +355,7 @@ mod tests {
     #[test]
     fn parameter_names_are_those_of_saved_models() {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
-        let policy = ActorCritic::new(4, 2, &config(), &mut rng).unwrap();
+        let policy = ActorCritic::new(4, 2, 0, &config(), &mut rng).unwrap();
         let mut names: Vec<String> = varmap_tensors(&policy.varmap, "").into_keys().collect();
         names.sort();
         let mut want: Vec<String> = ["pi", "vf"]
@@ -300,7 +372,7 @@ mod tests {
     #[test]
     fn act_samples_around_the_mean_and_predict_draws_the_same_noise() {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let policy = ActorCritic::new(4, 2, &config(), &mut rng).unwrap();
+        let policy = ActorCritic::new(4, 2, 0, &config(), &mut rng).unwrap();
         let obs = [0.5f32, -1.0, 0.25, 2.0, 0.0, 0.1, -0.3, 1.0];
         let mean = policy.predict(&obs, true, &mut rng).unwrap();
         let det = policy.act(&obs, true, &mut rng).unwrap();
@@ -330,9 +402,41 @@ mod tests {
     }
 
     #[test]
+    fn a_privileged_critic_s_values_read_the_privileged_state_and_the_actions_never_do() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut policy = ActorCritic::new(4, 2, 3, &config(), &mut rng).unwrap();
+        let weights = varmap_tensors(&policy.varmap, "");
+        assert_eq!(weights["pi.l0.weight"].dims(), [8, 4]);
+        assert_eq!(weights["vf.l0.weight"].dims(), [8, 7]);
+        let obs = [0.5f32, -1.0, 0.25, 2.0, 0.0, 0.1, -0.3, 1.0];
+        let critic = |privileged: [f32; 3]| -> Vec<f32> {
+            obs.chunks(4)
+                .flat_map(|o| o.iter().chain(&privileged).copied())
+                .collect()
+        };
+        let err = policy.act(&obs, false, &mut rng).err().unwrap();
+        assert!(err.to_string().contains("reads 7 values per row"), "{err}");
+        for written_out in [true, false] {
+            policy.written_out = written_out;
+            let run = |privileged: [f32; 3]| {
+                let rows = critic(privileged);
+                let mut rng = ChaCha8Rng::seed_from_u64(11);
+                let out = policy
+                    .act_with_critic(&obs, Some(&rows), false, &mut rng)
+                    .unwrap();
+                assert_eq!(out.values, policy.values(&rows).unwrap());
+                out
+            };
+            let (a, b) = (run([0.0, 0.0, 0.0]), run([1.0, -2.0, 0.5]));
+            assert_eq!((&a.actions, &a.log_probs), (&b.actions, &b.log_probs));
+            assert_ne!(a.values, b.values);
+        }
+    }
+
+    #[test]
     fn acting_written_out_matches_candle_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let mut policy = ActorCritic::new(4, 2, &config(), &mut rng).unwrap();
+        let mut policy = ActorCritic::new(4, 2, 0, &config(), &mut rng).unwrap();
         let obs: Vec<f32> = (0..12).map(|i| (i as f32 * 0.37).sin() * 2.0).collect();
         let run = |policy: &ActorCritic, deterministic: bool| {
             let mut rng = ChaCha8Rng::seed_from_u64(11);

@@ -66,7 +66,8 @@ impl Policy {
         let actor = match meta.algo.as_str() {
             "ppo" => {
                 let config = meta.ppo.as_ref().ok_or_else(|| missing("ppo"))?;
-                let policy = ActorCritic::zeroed(meta.obs_dim, meta.act_dim, config)?;
+                let policy =
+                    ActorCritic::zeroed(meta.obs_dim, meta.act_dim, meta.privileged_dim, config)?;
                 load_varmap(&policy.varmap, weights).map_err(weights_error)?;
                 Actor::Ppo(policy)
             }
