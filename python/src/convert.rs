@@ -196,7 +196,8 @@ pub fn render_mode_name(mode: fairgrasp_env::core::RenderMode) -> &'static str {
 }
 
 /// `Info` as Gymnasium's info dict: `is_success` (SB3's key), `elapsed_steps`, the task's extras
-/// by name, `reward_terms` and `events`.
+/// by name, `reward_terms`, `events` and, where the env reports one, `privileged` (float32: for
+/// a critic only).
 pub fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
     let dict = PyDict::new(py);
     dict.set_item("is_success", info.success)?;
@@ -211,6 +212,9 @@ pub fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDic
     dict.set_item("reward_terms", terms)?;
     let events: Vec<&str> = info.events.iter().map(|e| event_name(*e)).collect();
     dict.set_item("events", events)?;
+    if !info.privileged.is_empty() {
+        dict.set_item("privileged", PyArray1::from_slice(py, &info.privileged))?;
+    }
     Ok(dict)
 }
 

@@ -176,3 +176,9 @@ def test_infos_carry_success_reward_terms_and_the_tasks_values():
     assert set(info["reward_terms"]) >= {"approach", "grasp", "time"}
     assert abs(sum(info["reward_terms"].values()) - reward) < 1e-5
     assert "grasped" in info and "lift" in info
+    assert "privileged" not in info
+    # With [readings] privileged: the true state's observation and the speed scale, for a critic.
+    env = fairgrasp.FairgraspEnv(readings={"enabled": True, "privileged": True})
+    obs, info = env.reset(seed=0)
+    assert info["privileged"].dtype == np.float32
+    assert info["privileged"].shape == (obs.shape[0] + 1,) and info["privileged"][-1] == 1.0

@@ -183,12 +183,11 @@ impl PrivilegedState {
             raw.extend_from_slice(self.of(env, info)?);
         }
         self.stats.update(&raw);
-        self.rows.clear();
+        let mut rows = Vec::with_capacity(raw.len());
         for row in raw.chunks_exact(self.dim) {
-            let mut out = std::mem::take(&mut self.rows);
-            self.normalize_into(row, &mut out);
-            self.rows = out;
+            self.normalize_into(row, &mut rows);
         }
+        self.rows = rows;
         Ok(())
     }
 
@@ -203,13 +202,33 @@ impl PrivilegedState {
         self.set_rows(current)
     }
 
-    /// `obs` rows each followed by the privileged row of `privileged`, into `out`.
-    fn join(obs: &[f32], obs_dim: usize, privileged: &[f32], dim: usize, out: &mut Vec<f32>) {
+    /// The value network's input for the current observations `obs`: each row followed by its
+    /// environment's privileged state, written into `out`.
+    fn critic_input<'o>(&self, obs: &[f32], obs_dim: usize, out: &'o mut Vec<f32>) -> &'o [f32] {
         out.clear();
-        for (o, p) in obs.chunks_exact(obs_dim).zip(privileged.chunks_exact(dim)) {
+        for (o, p) in obs
+            .chunks_exact(obs_dim)
+            .zip(self.rows.chunks_exact(self.dim))
+        {
             out.extend_from_slice(o);
             out.extend_from_slice(p);
         }
+        out
+    }
+
+    /// The value network's input for environment `env`'s terminal observation, whose
+    /// privileged state is in the final step's `info`.
+    fn terminal_input<'o>(
+        &self,
+        env: usize,
+        info: &Info,
+        terminal_observation: &[f32],
+        out: &'o mut Vec<f32>,
+    ) -> Result<&'o [f32]> {
+        out.clear();
+        out.extend_from_slice(terminal_observation);
+        self.normalize_into(self.of(env, info)?, out);
+        Ok(out)
     }
 }
 
@@ -351,13 +370,8 @@ impl Ppo {
         let mut clipped = vec![0.0; n * space.dim()];
         let (mut critic_obs, mut terminal) = (Vec::new(), Vec::new());
         while !self.buffer.is_full() {
-            let critic = match &self.privileged {
-                Some(p) => {
-                    PrivilegedState::join(&obs, od, &p.rows, p.dim, &mut critic_obs);
-                    Some(critic_obs.as_slice())
-                }
-                None => None,
-            };
+            let privileged = self.privileged.as_ref();
+            let critic = privileged.map(|p| p.critic_input(&obs, od, &mut critic_obs));
             let out = (self.policy).act_with_critic(&obs, critic, false, &mut self.rng)?;
             clipped.copy_from_slice(&out.actions);
             for row in clipped.chunks_mut(space.dim()) {
@@ -369,16 +383,15 @@ impl Ppo {
             // Bootstrap truncated episodes from their real final observation.
             for (i, end) in step.episode_ends.iter().enumerate() {
                 if let (Some(end), true) = (end, step.truncated[i]) {
+                    let last = &end.terminal_observation;
                     let v = match &self.privileged {
                         Some(p) => {
-                            let mut last = Vec::new();
-                            p.normalize_into(p.of(i, &step.infos[i])?, &mut last);
-                            let (o, d) = (&end.terminal_observation, p.dim);
-                            PrivilegedState::join(o, od, &last, d, &mut terminal);
-                            self.policy.values(&terminal)?[0]
+                            let info = &step.infos[i];
+                            self.policy
+                                .values(p.terminal_input(i, info, last, &mut terminal)?)?
                         }
-                        None => self.policy.values(&end.terminal_observation)?[0],
-                    };
+                        None => self.policy.values(last)?,
+                    }[0];
                     rewards[i] += self.config.gamma * v;
                 }
             }
@@ -402,10 +415,9 @@ impl Ppo {
             self.num_timesteps += n as u64;
         }
         let last_values = match &self.privileged {
-            Some(p) => {
-                PrivilegedState::join(&obs, od, &p.rows, p.dim, &mut critic_obs);
-                self.policy.values(&critic_obs)?
-            }
+            Some(p) => self
+                .policy
+                .values(p.critic_input(&obs, od, &mut critic_obs))?,
             None => self.policy.values(&obs)?,
         };
         self.buffer.compute_returns_and_advantages(
