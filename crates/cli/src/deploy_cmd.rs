@@ -209,7 +209,7 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         options.safety.speed_scale,
         args.log.display()
     );
-    let mut operator = OperatorHost;
+    let mut operator = OperatorHost::stdin();
     let mut twin_host = twin;
     let host: &mut dyn EpisodeHost = match &mut twin_host {
         Some(t) => t,

@@ -61,7 +61,27 @@ impl EpisodeHost for TwinHost {
 }
 
 /// A real robot: the operator places the object and presses Enter; nobody judges.
-pub struct OperatorHost;
+///
+/// Only a line counts as Enter: at the end of the input (stdin closed, or deploy run under a
+/// pipe or nohup with nothing to read) the episode is refused, so an arm never starts moving
+/// without a person having confirmed that the cell is clear.
+pub struct OperatorHost {
+    input: Box<dyn BufRead>,
+}
+
+impl OperatorHost {
+    /// The operator at this terminal.
+    pub fn stdin() -> Self {
+        Self::new(std::io::BufReader::new(std::io::stdin()))
+    }
+
+    /// An operator whose confirmations are the lines of `input`.
+    pub fn new(input: impl BufRead + 'static) -> Self {
+        Self {
+            input: Box::new(input),
+        }
+    }
+}
 
 impl EpisodeHost for OperatorHost {
     fn begin(&mut self, index: u32) -> Result<()> {
@@ -71,11 +91,39 @@ impl EpisodeHost for OperatorHost {
             index + 1
         );
         let mut line = String::new();
-        std::io::stdin().lock().read_line(&mut line)?;
+        if self.input.read_line(&mut line)? == 0 {
+            return Err(DeployError::Other(format!(
+                "episode {}: the input ended before the operator pressed Enter; end of input \
+                 never confirms an episode (run deploy from a terminal)",
+                index + 1
+            )));
+        }
         Ok(())
     }
 
     fn outcome(&mut self) -> Result<Option<bool>> {
         Ok(None)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_line_confirms_an_episode_and_the_end_of_input_refuses() {
+        let mut host = OperatorHost::new(&b"\nready\n"[..]);
+        host.begin(0).unwrap();
+        host.begin(1).unwrap();
+        let err = host.begin(2).unwrap_err().to_string();
+        assert!(
+            err.contains("episode 3") && err.contains("end of input never confirms"),
+            "{err}"
+        );
+        let err = OperatorHost::new(&b""[..])
+            .begin(0)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("episode 1"), "{err}");
     }
 }
