@@ -668,3 +668,60 @@ fn the_centre_term_costs_a_close_commanded_off_the_objects_centre() {
     );
     assert!(centred[55] > expected, "{centred:?}");
 }
+
+#[test]
+fn contact_stiffness_is_drawn_per_episode_and_softer_contacts_let_the_pads_sink_into_the_cube() {
+    // The opening at which the fingers hold the squeezed cube, contacts at `hz`.
+    let held_opening = |hz: f32| {
+        let mut env = env_with(|c| c.scene.physics.contact_frequency = hz);
+        env.reset(Some(2)).unwrap();
+        let mut policy = ScriptedGraspPolicy::new(&env);
+        let mut held = None;
+        loop {
+            let step = env.step(&policy.act(&env)).unwrap();
+            let state = env.state().unwrap();
+            if state.grasped(0) {
+                held = Some(state.gripper_opening);
+            }
+            if step.terminated || step.truncated {
+                return held.expect("the scripted grasp holds the cube");
+            }
+        }
+    };
+    let (stiff, soft) = (held_opening(300.0), held_opening(15.0));
+    assert!(
+        stiff - soft > 0.01,
+        "held at {stiff} m (300 Hz), {soft} m (15 Hz)"
+    );
+
+    let mut env = env_with(|c| {
+        c.randomization.enabled = true;
+        c.randomization.contact_stiffness_scale = Some([0.05, 1.0]);
+    });
+    let drawn: Vec<f32> = (0..40)
+        .map(|_| {
+            let (_, info) = env.reset(None).unwrap();
+            let hz = info.extras.get("param/contact_frequency").unwrap();
+            assert_eq!(env.scene().contact_frequency(), hz);
+            hz
+        })
+        .collect();
+    assert!(
+        drawn.iter().all(|hz| (14.999..=300.001).contains(hz)),
+        "{drawn:?}"
+    );
+    // Log-uniform: about as many below the range's geometric middle (67 Hz) as above it.
+    let below = drawn
+        .iter()
+        .filter(|&&hz| hz < (15.0f32 * 300.0).sqrt())
+        .count();
+    assert!(
+        (10..=30).contains(&below),
+        "{below} of 40 below 67 Hz: {drawn:?}"
+    );
+    // Without the range nothing is drawn: the scene's own contacts.
+    let mut plain = env_with(|c| c.randomization.enabled = true);
+    let (_, info) = plain.reset(Some(1)).unwrap();
+    assert_eq!(info.extras.get("param/contact_frequency"), None);
+    assert_eq!(plain.scene().contact_frequency(), 300.0);
+}

@@ -94,6 +94,11 @@ pub struct RandomizationConfig {
     pub joint_damping_scale: Option<[f32; 2]>,
     /// Factor on the arm's PD gains.
     pub actuator_gain_scale: [f32; 2],
+    /// When set, each episode's contact stiffness is `scene.physics.contact_frequency` times a
+    /// factor drawn log-uniformly from this range (contacts with the table twice as stiff, as
+    /// always): below 1 the pads sink into a squeezed object, as a compliant pad or a softer
+    /// engine lets them.
+    pub contact_stiffness_scale: Option<[f32; 2]>,
     /// Actions reach the robot `min_latency_steps…max_latency_steps` control steps late (drawn
     /// per episode).
     pub min_latency_steps: u32,
@@ -117,6 +122,7 @@ impl Default for RandomizationConfig {
             joint_damping: [0.1, 1.0],
             joint_damping_scale: None,
             actuator_gain_scale: [0.8, 1.2],
+            contact_stiffness_scale: None,
             min_latency_steps: 0,
             max_latency_steps: 2,
             initial_joint_jitter: 0.05,
@@ -151,6 +157,9 @@ impl RandomizationConfig {
             0.05,
             20.0,
         )?;
+        if let Some(scale) = self.contact_stiffness_scale {
+            check_range("randomization.contact_stiffness_scale", scale, 0.01, 10.0)?;
+        }
         if self.max_latency_steps > 10 {
             return Err(EnvError::config(
                 "randomization.max_latency_steps",

@@ -382,6 +382,15 @@ impl<T: Task> ArmEnv<T> {
             }
             self.scene.set_object_params(i, &shape, mass, friction)?;
         }
+        // Drawn only when set, so that configurations without it draw exactly as before.
+        if let (true, Some(scale)) = (d.enabled, d.contact_stiffness_scale) {
+            // Log-uniform: a scale spanning decades draws as often in each (15-30 Hz as
+            // 150-300 Hz).
+            let log_scale = uniform(&mut self.rng, scale.map(f32::ln)).exp();
+            let hz = self.scene.config().physics.contact_frequency * log_scale;
+            self.scene.set_contact_frequency(hz)?;
+            report.set("param/contact_frequency", hz);
+        }
         Ok((latency, report))
     }
 

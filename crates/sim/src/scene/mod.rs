@@ -603,6 +603,25 @@ impl Scene {
             .joint_positions(&self.world.bodies, &self.world.multibody_joints)[self.finger]
     }
 
+    /// Sets the contacts' stiffness as a natural frequency (Hz), contacts with fixed bodies (the
+    /// table) twice as stiff, as the scene builds them from `physics.contact_frequency`: softer
+    /// contacts let the pads sink into a squeezed object. Kept until set again.
+    pub fn set_contact_frequency(&mut self, hz: f32) -> Result<()> {
+        if !(hz.is_finite() && hz > 0.0) {
+            return Err(SimError::Command(format!(
+                "contact frequency {hz} Hz must be positive"
+            )));
+        }
+        self.params.contact_softness.natural_frequency = hz;
+        self.params.static_contact_softness.natural_frequency = hz * 2.0;
+        Ok(())
+    }
+
+    /// The contacts' stiffness as a natural frequency (Hz; see [`Self::set_contact_frequency`]).
+    pub fn contact_frequency(&self) -> f32 {
+        self.params.contact_softness.natural_frequency
+    }
+
     /// Commands the fingers to an opening (m); they squeeze with at most the force limit.
     pub fn set_gripper_target(&mut self, opening: f32) -> Result<()> {
         if !opening.is_finite() {
