@@ -89,6 +89,11 @@ pub struct DeployArgs {
     /// A fixed object pose: x,y,z in metres in the robot base frame, optionally ,yaw_deg.
     #[arg(long, conflicts_with_all = ["pose_udp", "pose_tcp"])]
     pub object_pose: Option<String>,
+    /// With --object-pose and --live: move the arm although the pose never updates. The policy
+    /// then never sees the object move when it nudges or pushes it, and may close on air or
+    /// drive into it; live runs refuse a fixed pose without this flag.
+    #[arg(long, requires = "object_pose")]
+    pub static_object: bool,
     /// Receive object poses as JSON-line datagrams on this address (e.g. 0.0.0.0:20101).
     #[arg(long)]
     pub pose_udp: Option<String>,
@@ -137,6 +142,13 @@ pub fn interrupt_flag() -> Result<Arc<AtomicBool>> {
 }
 
 pub fn run(args: &DeployArgs) -> Result<()> {
+    if args.live && args.object_pose.is_some() && !args.static_object {
+        bail!(
+            "--object-pose with --live: a fixed pose never updates, so the policy would not see \
+             the object move if it pushes it. Stream poses (--pose-udp, --pose-tcp) or, for an \
+             object fixed in place, add --static-object"
+        );
+    }
     let policy = Policy::load(&args.model)
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
     let mut safety = load_safety(args.safety.as_deref())?;

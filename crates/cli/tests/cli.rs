@@ -614,3 +614,39 @@ fn bench_sac_prints_gradient_steps_at_the_default_sizes() {
     let (_, stderr) = text(&fairgrasp(&["bench", "sac", "--set", "sac.batch_size=0"]));
     assert!(stderr.contains("sac.batch_size"), "{stderr}");
 }
+
+#[test]
+fn a_live_deploy_refuses_a_fixed_object_pose_unless_told_the_object_is_static() {
+    let model = repo().join("crates/deploy/tests/data/deploy_ppo");
+    let args = [
+        "deploy",
+        "--robot",
+        "127.0.0.1",
+        "--model",
+        model.to_str().unwrap(),
+        "--live",
+        "--object-pose",
+        "0.45,0.0,0.025",
+    ];
+    let out = fairgrasp(&args);
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("--object-pose with --live") && stderr.contains("--static-object"),
+        "{stderr}"
+    );
+    // The flag needs a fixed pose to apply to.
+    let out = fairgrasp(&[
+        "deploy",
+        "--robot",
+        "127.0.0.1",
+        "--model",
+        "m",
+        "--static-object",
+    ]);
+    let (_, stderr) = text(&out);
+    assert!(
+        !out.status.success() && stderr.contains("--object-pose"),
+        "{stderr}"
+    );
+}
