@@ -103,6 +103,18 @@ impl RunningMeanStd {
         Ok(())
     }
 
+    /// Normalises whole rows of `x` into `out` (same length): `clip((x − mean) / sqrt(var +
+    /// epsilon), ±clip)`, SB3 VecNormalize's rule.
+    pub fn normalize_into(&self, x: &[f32], epsilon: f64, clip: f64, out: &mut [f32]) {
+        let dim = self.dim().max(1);
+        for (row_in, row_out) in x.chunks_exact(dim).zip(out.chunks_exact_mut(dim)) {
+            let stats = self.mean.iter().zip(&self.var);
+            for ((o, &x), (&m, &v)) in row_out.iter_mut().zip(row_in).zip(stats) {
+                *o = ((x as f64 - m) / (v + epsilon).sqrt()).clamp(-clip, clip) as f32;
+            }
+        }
+    }
+
     /// Adds a batch of vectors stored row-major (`rows × dim` values), like SB3's
     /// `update(arr)`: the batch mean and population variance (two-pass) are merged in with
     /// [`Self::update_from_moments`]. An empty batch changes nothing.

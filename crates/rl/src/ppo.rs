@@ -167,12 +167,11 @@ impl PrivilegedState {
         Ok(&info.privileged)
     }
 
-    /// Normalises `raw` into `out` with the current statistics.
+    /// Appends `raw`, normalised with the current statistics, to `out`.
     fn normalize_into(&self, raw: &[f32], out: &mut Vec<f32>) {
-        let (mean, var) = (self.stats.mean(), self.stats.var());
-        out.extend(raw.iter().zip(mean.iter().zip(var)).map(|(&x, (&m, &v))| {
-            ((x as f64 - m) / (v + Self::EPSILON).sqrt()).clamp(-Self::CLIP, Self::CLIP) as f32
-        }));
+        let start = out.len();
+        out.resize(start + raw.len(), 0.0);
+        (self.stats).normalize_into(raw, Self::EPSILON, Self::CLIP, &mut out[start..]);
     }
 
     /// Takes each environment's current privileged state (from `infos`), updating the

@@ -208,15 +208,8 @@ impl VecNormalizeState {
             out.copy_from_slice(obs);
             return;
         }
-        let eps = self.config.epsilon;
         let clip = self.config.clip_obs as f64;
-        let (mean, var) = (self.obs_rms.mean(), self.obs_rms.var());
-        let dim = self.obs_dim().max(1);
-        for (row_in, row_out) in obs.chunks_exact(dim).zip(out.chunks_exact_mut(dim)) {
-            for ((o, &x), (&m, &v)) in row_out.iter_mut().zip(row_in).zip(mean.iter().zip(var)) {
-                *o = ((x as f64 - m) / (v + eps).sqrt()).clamp(-clip, clip) as f32;
-            }
-        }
+        (self.obs_rms).normalize_into(obs, self.config.epsilon, clip, out);
     }
 
     /// The statistics file's text.
