@@ -169,11 +169,35 @@ impl SerialChain {
         first
     }
 
+    /// Damped-least-squares IK that leaves the rotation about the root frame's z axis free:
+    /// the tool's axis is held (a top-down tool stays top-down) and its yaw is wherever the
+    /// joints take it, the last joint held at its limit when the target's yaw lies beyond it.
+    /// For a yaw the wrist cannot reach, so that the arm still moves to the position.
+    pub fn inverse_free_yaw(
+        &self,
+        target: &Isometry3<f64>,
+        seed: &[f64],
+        tolerance: f64,
+    ) -> Result<Vec<f64>> {
+        self.solve(target, seed, tolerance, true)
+    }
+
     fn inverse_from(
         &self,
         target: &Isometry3<f64>,
         seed: &[f64],
         tolerance: f64,
+    ) -> Result<Vec<f64>> {
+        self.solve(target, seed, tolerance, false)
+    }
+
+    /// The damped-least-squares search; `free_yaw` drops the z row of the rotation error.
+    fn solve(
+        &self,
+        target: &Isometry3<f64>,
+        seed: &[f64],
+        tolerance: f64,
+        free_yaw: bool,
     ) -> Result<Vec<f64>> {
         let n = self.dof();
         if seed.len() != n {
@@ -189,8 +213,12 @@ impl SerialChain {
             .collect();
         let mut error = f64::INFINITY;
         for _ in 0..200 {
-            let (pose, jac) = self.jacobian(&q);
-            let e = pose_error(&pose, target);
+            let (pose, mut jac) = self.jacobian(&q);
+            let mut e = pose_error(&pose, target);
+            if free_yaw {
+                e[5] = 0.0;
+                jac.row_mut(5).fill(0.0);
+            }
             error = e.norm();
             if e.fixed_rows::<3>(0).norm() < tolerance && e.fixed_rows::<3>(3).norm() < tolerance {
                 return Ok(q);

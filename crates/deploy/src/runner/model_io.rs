@@ -8,7 +8,9 @@ use crate::error::{DeployError, Result};
 use crate::safety::SafetyConfig;
 use fairgrasp_env::Env;
 use fairgrasp_env::arm::erased::nominal_env;
-use fairgrasp_env::arm::{ActionMode, ArmState, Command, EstimatorFacts, SuccessJudge};
+use fairgrasp_env::arm::{
+    ActionMode, ArmState, Command, EstimatorFacts, MappingEvent, SuccessJudge,
+};
 use fairgrasp_env::arm::{ArmEnvConfig, ArmTaskEnv, ServoConfig, Task, TaskSettings};
 use fairgrasp_env::registry;
 use fairgrasp_env::sim::kinematics::SerialChain;
@@ -235,11 +237,7 @@ impl ModelIo {
     /// Applies an env action to the command; false when inverse kinematics failed (the
     /// targets were kept, as in training).
     pub fn apply(&self, state: &ArmState, action: &[f32], command: &mut Command) -> bool {
-        self.env
-            .inner()
-            .mapper()
-            .apply(state, action, command)
-            .is_none()
+        self.env.inner().mapper().apply(state, action, command) != Some(MappingEvent::IkFailed)
     }
 }
 

@@ -153,6 +153,9 @@ pub struct Command {
 pub enum MappingEvent {
     /// Inverse kinematics found no joints for the commanded pose; the targets were kept.
     IkFailed,
+    /// Cartesian mode: the commanded yaw lies beyond the wrist's reach; the TCP moved to the
+    /// commanded position pointing down, its yaw as far as the joints go.
+    YawLimited,
 }
 
 /// Maps actions to joint targets (see the [module](self) documentation).
@@ -272,11 +275,25 @@ impl ActionMapper {
                         target.translation.vector[k].clamp(lo[k] as f64, hi[k] as f64);
                 }
                 let seed: Vec<f64> = command.arm_target.iter().map(|&v| v as f64).collect();
-                match self.chain.inverse(&target, &seed, 1e-4) {
+                if let Ok(q) = self.chain.inverse(&target, &seed, 1e-4) {
+                    command.arm_target = q.into_iter().map(|v| v as f32).collect();
+                    command.tcp_target = target;
+                    return None;
+                }
+                // A yaw beyond the wrist's limit would otherwise freeze the arm: the policy
+                // sees the TCP's yaw but not the target's, so it kept asking for the move and
+                // the arm stood still for the rest of the episode.
+                match self.chain.inverse_free_yaw(&target, &seed, 1e-4) {
                     Ok(q) => {
+                        let reached = self.chain.forward(&q);
+                        let yaw_gap = (reached.rotation * target.rotation.inverse())
+                            .scaled_axis()
+                            .z;
+                        target.rotation =
+                            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_gap) * target.rotation;
                         command.arm_target = q.into_iter().map(|v| v as f32).collect();
                         command.tcp_target = target;
-                        None
+                        Some(MappingEvent::YawLimited)
                     }
                     Err(_) => Some(MappingEvent::IkFailed),
                 }
