@@ -143,3 +143,10 @@ def test_bench_sim2sim_runs_episodes_in_mujoco(tmp_path, trained_model):
     lines = [json.loads(line) for line in (tmp_path / "trace.jsonl").read_text().splitlines()]
     assert len(lines) >= sum(e["steps"] for e in detail) - 2
     assert all(len(line["obs"]) == 38 and len(line["action"]) == 5 for line in lines)
+    # With MuJoCo's own state at the readings: the observation's TCP (12:15) and object
+    # position (21:24) are the cell's, read through the deployment's estimator.
+    first = lines[0]
+    assert first["seed"] == 2_000_000_000 and [l["seed"] for l in lines][-1] == 2_000_000_001
+    assert first["obs"][12:15] == pytest.approx(first["world"]["tcp"], abs=2e-3)
+    assert first["obs"][21:24] == pytest.approx(first["world"]["cube"], abs=1e-4)
+    assert 0.08 < first["world"]["opening"] < 0.1 and first["world"]["pads_touch"] == [False, False]

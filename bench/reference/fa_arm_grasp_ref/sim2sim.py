@@ -291,6 +291,21 @@ class MujocoCell:
         pairs = list(zip(d.contact.geom1[: d.ncon], d.contact.geom2[: d.ncon]))
         return any({int(a), int(b)} == {g, self.cube_geom} for a, b in pairs for g in geoms)
 
+    def world(self) -> dict:
+        """MuJoCo's own state where the readings were taken, for a trace: the TCP and the
+        cube (base frame, m; the cube's orientation xyzw), the pads' distance (m) and which pads
+        touch the cube."""
+        mujoco.mj_kinematics(self.model, self.data)
+        tcp = self.base_rot.T @ (self.data.site_xpos[self.tcp] - self.base_pos)
+        cube, quat = self.cube_pose()
+        return {
+            "tcp": tcp.tolist(),
+            "cube": cube.tolist(),
+            "cube_quat_xyzw": quat,
+            "opening": self.opening(),
+            "pads_touch": [self.touching(g) for g in self.pad_geoms],
+        }
+
     def lift(self, rest_z: float) -> float:
         return float(self.cube_pose()[0][2] - rest_z)
 
@@ -338,7 +353,9 @@ class Episode:
 def run_episode(driver, cell: MujocoCell, cube: dict, seed: int, trace=None) -> Episode:
     """One episode of the model in the MuJoCo cell (see the module documentation). `trace`: a
     text file that gets each step's `{"obs": [...], "action": [...]}` line, the format of
-    `fairgrasp eval --trace`, to set beside fairgrasp's own trace of the same seed."""
+    `fairgrasp eval --trace`, to set beside fairgrasp's own trace of the same seed, with
+    MuJoCo's own state when the readings were taken (`world`, `MujocoCell.world`) and the
+    episode's `seed`."""
     min_lift, max_offset = driver.success_rule
     hold = driver.success_hold_steps
     rest_z = cube["rest_z"]
@@ -359,7 +376,8 @@ def run_episode(driver, cell: MujocoCell, cube: dict, seed: int, trace=None) -> 
     def record() -> None:
         if trace is not None and (last := driver.last_step()) is not None:
             obs, action = last
-            trace.write(json.dumps({"obs": obs, "action": action}) + "\n")
+            line = {"obs": obs, "action": action, "world": cell.world(), "seed": seed}
+            trace.write(json.dumps(line) + "\n")
 
     set_points, gripper_open, _ = driver.begin(*cell.readings())
     record()
@@ -432,7 +450,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fairgrasp-bin", help="run fairgrasp's evaluation with this binary (`eval --json`) instead of fairgrasp.evaluate")
     parser.add_argument("-v", "--verbose", action="store_true", help="a line per episode")
     parser.add_argument(
-        "--trace", help="write every step's observation and action as JSON lines here (`fairgrasp eval --trace`'s format)",
+        "--trace", help="write every step's observation and action as JSON lines here (`fairgrasp eval --trace`'s format, "
+        "with MuJoCo's TCP, cube pose, opening and pad contacts under `world` and the episode's `seed`)",
     )
     parser.add_argument(
         "--opening", choices=["both", "left"], default="both",
