@@ -223,6 +223,7 @@ fn event_name(event: EpisodeEvent) -> &'static str {
         EpisodeEvent::ObjectOffTable => "object_off_table",
         EpisodeEvent::NonFiniteState => "non_finite_state",
         EpisodeEvent::IkFailed => "ik_failed",
+        EpisodeEvent::Collision => "collision",
     }
 }
 

@@ -58,6 +58,9 @@ pub enum EpisodeEvent {
     /// Cartesian mode: inverse kinematics found no joint vector for the commanded pose; the
     /// previous target was kept (the episode goes on).
     IkFailed,
+    /// A robot link pressed on something harder than `control.collision_force_limit` allows,
+    /// as a cobot's collision detection would stop it (terminates, with the failure penalty).
+    Collision,
 }
 
 /// Named scalars in insertion order: a task's own values in [`Info::extras`] and the reward's

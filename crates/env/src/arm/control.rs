@@ -58,6 +58,12 @@ pub struct ControlConfig {
     /// simulator's, as on the arm. Physics costs the mean of 1/s. Below 1 it needs
     /// `[readings]`, which reads speeds in the policy's time.
     pub speed_scales: Vec<f32>,
+    /// A cobot's collision detection (N): the episode ends, failed with
+    /// [`EpisodeEvent::Collision`](crate::core::EpisodeEvent::Collision), when a robot link
+    /// presses on an object, the table or a bin with more than this force in any physics step.
+    /// Unset (the default): nothing is watched.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub collision_force_limit: Option<f32>,
 }
 
 impl Default for ControlConfig {
@@ -75,6 +81,7 @@ impl Default for ControlConfig {
             servo: ServoConfig::default(),
             gripper: GripperConfig::default(),
             speed_scales: vec![1.0],
+            collision_force_limit: None,
         }
     }
 }
@@ -111,6 +118,9 @@ impl ControlConfig {
                     format!("each scale must be at least 0.05 (physics ÷ 20), got {v}"),
                 ));
             }
+        }
+        if let Some(limit) = self.collision_force_limit {
+            positive("control.collision_force_limit", limit, 1e5)?;
         }
         positive("control.servo.period_ms", self.servo.period_ms, 100.0)?;
         positive(

@@ -692,9 +692,14 @@ impl<T: Task> Env for ArmEnv<T> {
             _ => 0,
         };
         let mut early = None;
+        let force_limit = self.config.control.collision_force_limit;
+        let mut peak_force: f32 = 0.0;
         let mut read_early = |scene: &Scene, done: u32| {
             if age > 0 && done == substeps - age {
                 early = Some(ArmState::from_scene(scene));
+            }
+            if force_limit.is_some() {
+                peak_force = peak_force.max(scene.robot_contact_force());
             }
         };
         let mut gripper = episode.gripper.as_mut();
@@ -750,7 +755,15 @@ impl<T: Task> Env for ArmEnv<T> {
             return Ok(self.non_finite_step());
         }
         let privileged = self.privileged(&state, &normalised, speed_scale);
-        let evaluation = self.task.evaluate(&self.scene, &state);
+        let mut evaluation = self.task.evaluate(&self.scene, &state);
+        if let Some(limit) = force_limit {
+            evaluation.extras.set("contact_force", peak_force);
+            if peak_force > limit {
+                // The controller stops the arm: no success, whatever the task saw.
+                evaluation.success = false;
+                evaluation.failure = Some(EpisodeEvent::Collision);
+            }
+        }
         let max_steps = self.config.task.max_episode_steps();
         let episode = self.episode.as_mut().expect("checked");
         episode.steps += 1;

@@ -478,6 +478,44 @@ impl Scene {
         )
     }
 
+    /// The total normal force (N) two named things pressed on each other in the last physics
+    /// step: the contact impulses over the step's duration. `None` if a name is unknown.
+    pub fn contact_force(&self, a: &str, b: &str) -> Option<f32> {
+        let a = self.colliders_of(a)?;
+        let b = self.colliders_of(b)?;
+        let impulse: f32 = (a.iter())
+            .flat_map(|&ca| b.iter().map(move |&cb| (ca, cb)))
+            .filter_map(|(ca, cb)| self.world.narrow_phase.contact_pair(ca, cb))
+            .map(|pair| pair.total_impulse_magnitude())
+            .sum();
+        Some(impulse / self.params.dt)
+    }
+
+    /// The largest normal force (N) between one robot link and one other body (an object, the
+    /// table, a bin part) in the last physics step: what a cobot's collision detection watches.
+    pub fn robot_contact_force(&self) -> f32 {
+        let robot = &self.robot.bodies;
+        let is_robot = |c: ColliderHandle| {
+            (self.world.colliders[c].parent()).is_some_and(|body| robot.contains(&body))
+        };
+        let mut peak: f32 = 0.0;
+        for &body in robot {
+            for &c in self.world.bodies[body].colliders() {
+                for pair in self.world.narrow_phase.contact_pairs_with(c) {
+                    let other = if pair.collider1 == c {
+                        pair.collider2
+                    } else {
+                        pair.collider1
+                    };
+                    if !is_robot(other) {
+                        peak = peak.max(pair.total_impulse_magnitude());
+                    }
+                }
+            }
+        }
+        peak / self.params.dt
+    }
+
     fn colliders_of(&self, name: &str) -> Option<Vec<ColliderHandle>> {
         if name == "table" {
             return Some(vec![self.table_collider]);
