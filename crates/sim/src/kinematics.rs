@@ -149,7 +149,7 @@ impl SerialChain {
         seed: &[f64],
         tolerance: f64,
     ) -> Result<Vec<f64>> {
-        let first = self.inverse_from(target, seed, tolerance);
+        let first = self.solve(target, seed, tolerance, false);
         if first.is_ok() || seed.is_empty() {
             return first;
         }
@@ -162,7 +162,7 @@ impl SerialChain {
             if restart[last] < lo || restart[last] > hi {
                 continue;
             }
-            if let Ok(q) = self.inverse_from(target, &restart, tolerance) {
+            if let Ok(q) = self.solve(target, &restart, tolerance, false) {
                 return Ok(q);
             }
         }
@@ -180,15 +180,6 @@ impl SerialChain {
         tolerance: f64,
     ) -> Result<Vec<f64>> {
         self.solve(target, seed, tolerance, true)
-    }
-
-    fn inverse_from(
-        &self,
-        target: &Isometry3<f64>,
-        seed: &[f64],
-        tolerance: f64,
-    ) -> Result<Vec<f64>> {
-        self.solve(target, seed, tolerance, false)
     }
 
     /// The damped-least-squares search; `free_yaw` drops the z row of the rotation error.

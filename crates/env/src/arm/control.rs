@@ -290,9 +290,8 @@ impl ActionMapper {
                     command.tcp_target = target;
                     return None;
                 }
-                // A yaw beyond the wrist's limit would otherwise freeze the arm: the policy
-                // sees the TCP's yaw but not the target's, so it kept asking for the move and
-                // the arm stood still for the rest of the episode.
+                // A yaw beyond the wrist's limit must not freeze the arm: the policy sees the
+                // TCP's yaw, not the target's, and would keep asking for a move never made.
                 match self.chain.inverse_free_yaw(&target, &seed, 1e-4) {
                     Ok(q) => {
                         let reached = self.chain.forward(&q);
