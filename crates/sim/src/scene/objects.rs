@@ -478,19 +478,6 @@ impl Scene {
         )
     }
 
-    /// The total normal force (N) two named things pressed on each other in the last physics
-    /// step: the contact impulses over the step's duration. `None` if a name is unknown.
-    pub fn contact_force(&self, a: &str, b: &str) -> Option<f32> {
-        let a = self.colliders_of(a)?;
-        let b = self.colliders_of(b)?;
-        let impulse: f32 = (a.iter())
-            .flat_map(|&ca| b.iter().map(move |&cb| (ca, cb)))
-            .filter_map(|(ca, cb)| self.world.narrow_phase.contact_pair(ca, cb))
-            .map(|pair| pair.total_impulse_magnitude())
-            .sum();
-        Some(impulse / self.params.dt)
-    }
-
     /// The largest normal force (N) between one robot link and one other body (an object, the
     /// table, a bin part) in the last physics step: what a cobot's collision detection watches.
     pub fn robot_contact_force(&self) -> f32 {
