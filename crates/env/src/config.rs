@@ -61,6 +61,19 @@ pub fn parse_toml<C: DeserializeOwned>(text: &str, overrides: &[String]) -> Resu
     from_table(table)
 }
 
+/// Lays `top` over `base`: sections merge key by key, any other value in `top` replaces
+/// `base`'s (as a later `--set` would).
+pub fn overlay(base: &mut toml::Table, top: &toml::Table) {
+    for (key, value) in top {
+        match (base.get_mut(key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(t)) => overlay(b, t),
+            _ => {
+                base.insert(key.clone(), value.clone());
+            }
+        }
+    }
+}
+
 /// Deserialises a TOML table into `C` (through text, so errors quote the line and name the key).
 pub fn from_table<C: DeserializeOwned>(table: toml::Table) -> Result<C> {
     let text =
@@ -108,4 +121,27 @@ pub fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
     }
     current.insert(parts[parts.len() - 1].to_string(), value);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overlay_merges_sections_and_replaces_values() {
+        let mut base: toml::Table = "a = 1\n[s]\nx = [1, 2]\ny = \"keep\"\n[s.t]\nz = 3\n"
+            .parse()
+            .unwrap();
+        let top: toml::Table = "b = 2\n[s]\nx = [5]\n[s.t]\nw = 4\n".parse().unwrap();
+        overlay(&mut base, &top);
+        let want: toml::Table =
+            "a = 1\nb = 2\n[s]\nx = [5]\ny = \"keep\"\n[s.t]\nz = 3\nw = 4\n"
+                .parse()
+                .unwrap();
+        assert_eq!(base, want);
+        // A value replaces a section and a section a value, as a later `--set` would.
+        let mut base: toml::Table = "s = 1\n[t]\nu = 1\n".parse().unwrap();
+        overlay(&mut base, &"t = 2\n[s]\nv = 3\n".parse().unwrap());
+        assert_eq!(base, "t = 2\n[s]\nv = 3\n".parse().unwrap());
+    }
 }

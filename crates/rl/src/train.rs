@@ -72,6 +72,10 @@ pub struct EvalConfig {
     pub record: bool,
     /// Width and height of those videos.
     pub record_size: [u32; 2],
+    /// Settings laid over the training env's for the evaluations and confirmations (SB3's
+    /// separate `eval_env`): e.g. the nominal scene, without the training's draws, so that the
+    /// stop rule measures the world the model is deployed to. Empty: the training env.
+    pub env: toml::Table,
 }
 
 impl Default for EvalConfig {
@@ -84,6 +88,7 @@ impl Default for EvalConfig {
             confirm_lower_bound: 0.95,
             record: false,
             record_size: [320, 240],
+            env: toml::Table::new(),
         }
     }
 }
@@ -222,14 +227,27 @@ impl TrainConfig {
                 key: "normalize".into(),
                 problem,
             })?;
-        registry::validate(&self.env_id, &self.env).map_err(|e| match e {
-            fairgrasp_env::EnvError::Config { key, problem } => RlError::Config {
-                key: format!("env.{key}"),
-                problem: format!("{problem} ({})", self.env_id),
-            },
-            other => other.into(),
-        })?;
+        let mut envs = vec![("env", self.env.clone())];
+        if !self.eval.env.is_empty() {
+            envs.push(("eval.env", self.eval_env()));
+        }
+        for (section, env) in &envs {
+            registry::validate(&self.env_id, env).map_err(|e| match e {
+                fairgrasp_env::EnvError::Config { key, problem } => RlError::Config {
+                    key: format!("{section}.{key}"),
+                    problem: format!("{problem} ({})", self.env_id),
+                },
+                other => other.into(),
+            })?;
+        }
         Ok(())
+    }
+
+    /// The env the evaluations play: the training env with `eval.env` laid over it.
+    pub fn eval_env(&self) -> toml::Table {
+        let mut env = self.env.clone();
+        fairgrasp_env::config::overlay(&mut env, &self.eval.env);
+        env
     }
 }
 
@@ -513,6 +531,7 @@ fn run<A: Algorithm>(
         privileged_dim,
     };
 
+    let eval_env = config.eval_env();
     let started = Instant::now();
     let start_steps = algo.num_timesteps();
     let mut progress = Progress {
@@ -583,7 +602,7 @@ fn run<A: Algorithm>(
             let result = evaluate_parallel(
                 &make_actor,
                 &config.env_id,
-                &config.env,
+                &eval_env,
                 config.eval.episodes,
                 EVAL_SEED_BASE,
                 config.threads,
@@ -604,7 +623,7 @@ fn run<A: Algorithm>(
                 let gif = record_episode(
                     &mut actor,
                     &config.env_id,
-                    &config.env,
+                    &eval_env,
                     EVAL_SEED_BASE,
                     config.eval.record_size,
                 )?;
@@ -629,7 +648,7 @@ fn run<A: Algorithm>(
                 let confirmation = evaluate_parallel(
                     &make_actor,
                     &config.env_id,
-                    &config.env,
+                    &eval_env,
                     config.eval.confirm_episodes,
                     VALIDATION_SEED_BASE,
                     config.threads,

@@ -125,6 +125,34 @@ fn a_short_run_writes_config_logs_best_model_and_checkpoints() {
 }
 
 #[test]
+fn evaluations_and_confirmations_play_the_eval_env_laid_over_the_training_env() {
+    // Training episodes last 20 steps; `eval.env` cuts the evaluated ones to 7. An untrained
+    // policy never succeeds, so every evaluated episode runs to its limit.
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = tiny_config_with(1024, &["eval.env.task.max_episode_steps=7"]).unwrap();
+    config.checkpoint_freq = 0;
+    config.eval.success_threshold = Some(0.0);
+    config.eval.confirm_episodes = 3;
+    config.eval.confirm_lower_bound = 1.0;
+    assert_eq!(config.eval_env()["task"]["max_episode_steps"].as_integer(), Some(7));
+    assert_eq!(config.env["task"]["max_episode_steps"].as_integer(), Some(20));
+    assert_eq!(config.eval_env()["reward"]["kind"].as_str(), Some("staged"));
+    let summary = train(&config, dir.path(), |_| {}).unwrap();
+    let best = summary.best.unwrap();
+    assert!(best.confirmed && best.episodes == 3, "{best:?}");
+    assert_eq!(best.mean_length, 7.0);
+    let lengths: Vec<f32> = (run_scalars(dir.path()).iter())
+        .filter(|s| s.tag == "eval/mean_ep_length")
+        .map(|s| s.value)
+        .collect();
+    assert_eq!(lengths, [7.0, 7.0]);
+    // The model keeps the training env: its own evaluations play 20-step episodes.
+    let policy = Policy::load(&dir.path().join("final")).unwrap();
+    let saved = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
+    assert_eq!(saved["task"]["max_episode_steps"].as_integer(), Some(20));
+}
+
+#[test]
 fn training_config_errors_name_the_key() {
     for (text, key) in [
         ("n_envs = 0\n", "n_envs"),
@@ -137,6 +165,10 @@ fn training_config_errors_name_the_key() {
         ("[env.task]\nmax_joint_delta = 9.0\n", "max_joint_delta"),
         ("env_id = \"FaArmJuggle-v9\"\n", "FaArmJuggle-v9"),
         ("[eval]\nrecord_size = [8, 8]\n", "eval.record_size"),
+        (
+            "[eval.env.control]\nmax_joint_delta = 9.0\n",
+            "eval.env.control.max_joint_delta",
+        ),
     ] {
         let err = TrainConfig::from_toml_str(text, &[])
             .err()
