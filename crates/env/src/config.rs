@@ -134,10 +134,9 @@ mod tests {
             .unwrap();
         let top: toml::Table = "b = 2\n[s]\nx = [5]\n[s.t]\nw = 4\n".parse().unwrap();
         overlay(&mut base, &top);
-        let want: toml::Table =
-            "a = 1\nb = 2\n[s]\nx = [5]\ny = \"keep\"\n[s.t]\nz = 3\nw = 4\n"
-                .parse()
-                .unwrap();
+        let want: toml::Table = "a = 1\nb = 2\n[s]\nx = [5]\ny = \"keep\"\n[s.t]\nz = 3\nw = 4\n"
+            .parse()
+            .unwrap();
         assert_eq!(base, want);
         // A value replaces a section and a section a value, as a later `--set` would.
         let mut base: toml::Table = "s = 1\n[t]\nu = 1\n".parse().unwrap();

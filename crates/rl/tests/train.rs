@@ -134,8 +134,14 @@ fn evaluations_and_confirmations_play_the_eval_env_laid_over_the_training_env() 
     config.eval.success_threshold = Some(0.0);
     config.eval.confirm_episodes = 3;
     config.eval.confirm_lower_bound = 1.0;
-    assert_eq!(config.eval_env()["task"]["max_episode_steps"].as_integer(), Some(7));
-    assert_eq!(config.env["task"]["max_episode_steps"].as_integer(), Some(20));
+    assert_eq!(
+        config.eval_env()["task"]["max_episode_steps"].as_integer(),
+        Some(7)
+    );
+    assert_eq!(
+        config.env["task"]["max_episode_steps"].as_integer(),
+        Some(20)
+    );
     assert_eq!(config.eval_env()["reward"]["kind"].as_str(), Some("staged"));
     let summary = train(&config, dir.path(), |_| {}).unwrap();
     let best = summary.best.unwrap();
