@@ -240,6 +240,25 @@ impl TrainConfig {
                 other => other.into(),
             })?;
         }
+        if !self.eval.env.is_empty() {
+            // The policy trained on one env must be able to act in the other.
+            let (train, eval) = (
+                registry::make(&self.env_id, &self.env)?,
+                registry::make(&self.env_id, &self.eval_env())?,
+            );
+            let dims = |e: &dyn Env| (e.observation_space().dim(), e.action_space().dim());
+            if dims(train.as_ref()) != dims(eval.as_ref()) {
+                return bad(
+                    "eval.env",
+                    &format!(
+                        "changes the (observation, action) sizes from {:?} to {:?}: the policy \
+                         could not act in it",
+                        dims(train.as_ref()),
+                        dims(eval.as_ref())
+                    ),
+                );
+            }
+        }
         Ok(())
     }
 

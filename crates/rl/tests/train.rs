@@ -175,6 +175,10 @@ fn training_config_errors_name_the_key() {
             "[eval.env.control]\nmax_joint_delta = 9.0\n",
             "eval.env.control.max_joint_delta",
         ),
+        (
+            "[eval.env.task]\nobservation = \"seed23\"\n",
+            "`eval.env`: changes the (observation, action) sizes from (40, 7) to (23, 7)",
+        ),
     ] {
         let err = TrainConfig::from_toml_str(text, &[])
             .err()
