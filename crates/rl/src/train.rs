@@ -227,34 +227,31 @@ impl TrainConfig {
                 key: "normalize".into(),
                 problem,
             })?;
-        let mut envs = vec![("env", self.env.clone())];
-        if !self.eval.env.is_empty() {
-            envs.push(("eval.env", self.eval_env()));
-        }
-        for (section, env) in &envs {
+        let check = |section: &str, env: &toml::Table| {
             registry::validate(&self.env_id, env).map_err(|e| match e {
                 fairgrasp_env::EnvError::Config { key, problem } => RlError::Config {
                     key: format!("{section}.{key}"),
                     problem: format!("{problem} ({})", self.env_id),
                 },
                 other => other.into(),
-            })?;
-        }
+            })
+        };
+        check("env", &self.env)?;
         if !self.eval.env.is_empty() {
+            let eval_env = self.eval_env();
+            check("eval.env", &eval_env)?;
             // The policy trained on one env must be able to act in the other.
-            let (train, eval) = (
-                registry::make(&self.env_id, &self.env)?,
-                registry::make(&self.env_id, &self.eval_env())?,
-            );
-            let dims = |e: &dyn Env| (e.observation_space().dim(), e.action_space().dim());
-            if dims(train.as_ref()) != dims(eval.as_ref()) {
+            let sizes = |env: &toml::Table| -> Result<(usize, usize)> {
+                let e = registry::make(&self.env_id, env)?;
+                Ok((e.observation_space().dim(), e.action_space().dim()))
+            };
+            let (train, eval) = (sizes(&self.env)?, sizes(&eval_env)?);
+            if train != eval {
                 return bad(
                     "eval.env",
                     &format!(
-                        "changes the (observation, action) sizes from {:?} to {:?}: the policy \
-                         could not act in it",
-                        dims(train.as_ref()),
-                        dims(eval.as_ref())
+                        "changes the (observation, action) sizes from {train:?} to {eval:?}: \
+                         the policy could not act in it"
                     ),
                 );
             }
