@@ -4,7 +4,7 @@
 //! noise) and live on the digital twin over the real protocol.
 //!
 //! What is cut to fit the suite, and why it still guards transfer: the shipped config trains
-//! a quarter of its episodes at speed scale 0.25 (1.75x the physics of scale 1 alone) and
+//! an eighth of its episodes at speed scale 0.25 (1.375x the physics of scale 1 alone) and
 //! confirms its stop on 400 validation episodes. Here it trains at scale 1 only and confirms
 //! on 200 at a 0.93 bound, and is judged at scale 1: every other part of the deployment's
 //! path (readings, the servo ramp, the gripper's controller, the estimator, the safety filter,
