@@ -7,7 +7,6 @@ use fairgrasp_deploy::commissioning::{
     CalibrationReadings, JogOptions, calibration_from_readings, jog_test,
 };
 use fairgrasp_deploy::fairino::error_code_meaning;
-use fairgrasp_deploy::kinematics::tcp_forward_kinematics;
 use fairgrasp_deploy::robot::RobotLink;
 use fairgrasp_deploy::runner::ModelIo;
 use fairgrasp_deploy::safety::{SafetyFilter, Watchdog};
@@ -157,7 +156,7 @@ pub fn jog(args: &JogArgs) -> Result<()> {
         }
     };
     let safety = load_safety(args.safety.as_deref())?;
-    let fk = tcp_forward_kinematics(io.chain.clone(), calibration.clone());
+    let fk = io.arm_kinematics(&calibration);
     let filter = SafetyFilter::new(
         &safety,
         &calibration.soft_limits(),

@@ -18,6 +18,12 @@ use crate::error::{DeployError, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+use crate::fairino::fr5;
+
+/// Slack on the published limits (deg): the model's limits are given in radians to 4 places
+/// (4.6251 rad is 265.0002 deg).
+const PUBLISHED_SLACK_DEG: f64 = 0.01;
+
 /// One joint's mapping.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -59,8 +65,20 @@ impl Calibration {
         }
     }
 
-    /// Checks the file's values; errors name the joint and the key.
+    /// Checks the file's values; errors name the joint and the key. The label must name the
+    /// FR5 (the arm whose published limits are known), and every soft limit lie within them.
     pub fn validate(&self) -> Result<()> {
+        let model = self.robot.split_whitespace().next().unwrap_or("");
+        if !model.to_ascii_uppercase().starts_with("FR5") {
+            return Err(DeployError::config(
+                "calibration robot",
+                format!(
+                    "\"{}\" is not an FR5: fairgrasp knows the FR5's published joint limits only \
+                     (label the file \"FR5 …\")",
+                    self.robot
+                ),
+            ));
+        }
         if self.joints.len() != 6 {
             return Err(DeployError::config(
                 "calibration",
@@ -84,10 +102,16 @@ impl Calibration {
                     ),
                 ));
             }
-            if j.min_deg < -360.0 || j.max_deg > 360.0 {
+            let (lo, hi) = fr5::JOINT_LIMITS_DEG[i];
+            if j.min_deg < lo - PUBLISHED_SLACK_DEG || j.max_deg > hi + PUBLISHED_SLACK_DEG {
                 return Err(DeployError::config(
                     at("min_deg"),
-                    "limits must be within ±360",
+                    format!(
+                        "[{}, {}] deg reaches beyond the FR5's joint {} limits [{lo}, {hi}] deg",
+                        j.min_deg,
+                        j.max_deg,
+                        i + 1
+                    ),
                 ));
             }
         }
@@ -155,5 +179,42 @@ impl Calibration {
     /// Each joint's (min, max) soft limits (robot deg).
     pub fn soft_limits(&self) -> Vec<(f64, f64)> {
         self.joints.iter().map(|j| (j.min_deg, j.max_deg)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fr5() -> Calibration {
+        let limits: Vec<(f32, f32)> = fr5::JOINT_LIMITS_DEG
+            .iter()
+            .map(|&(lo, hi)| ((lo as f32).to_radians(), (hi as f32).to_radians()))
+            .collect();
+        Calibration::identity(&limits)
+    }
+
+    #[test]
+    fn soft_limits_beyond_the_fr5_s_published_limits_are_refused() {
+        assert!(fr5().validate().is_ok());
+        // Within ±360, once accepted: joint 3 of the FR5 stops at ±162 deg.
+        let mut c = fr5();
+        c.joints[2].max_deg = 300.0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("joint 3") && e.contains("162"), "{e}");
+        let mut c = fr5();
+        c.joints[1].min_deg = -300.0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("joint 2") && e.contains("-265"), "{e}");
+    }
+
+    #[test]
+    fn a_calibration_for_another_arm_is_refused() {
+        let mut c = fr5();
+        c.robot = "FR10 #42".into();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("FR10") && e.contains("FR5"), "{e}");
+        c.robot = "FR5 #1234".into();
+        assert!(c.validate().is_ok());
     }
 }

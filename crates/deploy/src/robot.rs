@@ -84,10 +84,12 @@ pub enum RobotCommand {
     SetSpeed {
         percent: u8,
     },
-    /// Blocking joint move; `speed_percent` of the controller's maximum.
+    /// Blocking joint move; `speed_percent` and `acc_percent` of the controller's maximum
+    /// joint speed and acceleration (in (0, 100]).
     MoveJ {
         joints_deg: [f64; 6],
         speed_percent: f64,
+        acc_percent: f64,
     },
     ServoMoveStart,
     /// One servo set point, reached in `cmd_t` seconds (0.001–0.016).

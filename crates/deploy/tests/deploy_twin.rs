@@ -170,7 +170,6 @@ fn without_faults_episodes_run_to_the_end_and_are_judged() {
 #[test]
 fn the_jog_test_moves_each_joint_and_back_on_the_twin() {
     use fairgrasp_deploy::commissioning::{JogOptions, jog_test};
-    use fairgrasp_deploy::kinematics::tcp_forward_kinematics;
     use fairgrasp_deploy::robot::RobotLink;
     use fairgrasp_deploy::safety::{SafetyFilter, Watchdog};
     let twin = Twin::spawn(TwinConfig::ephemeral()).unwrap();
@@ -182,7 +181,7 @@ fn the_jog_test_moves_each_joint_and_back_on_the_twin() {
         &safety,
         &calibration.soft_limits(),
         io.nominal.table_z * 1000.0,
-        tcp_forward_kinematics(io.chain.clone(), calibration.clone()),
+        io.arm_kinematics(&calibration),
     )
     .unwrap();
     let watchdog = Watchdog::new(

@@ -714,6 +714,7 @@ fn fairino_client_sends_the_sdk_arguments() {
         .send(&RobotCommand::MoveJ {
             joints_deg: joints,
             speed_percent: 20.0,
+            acc_percent: 0.0,
         })
         .unwrap();
     let calls = robot.take_calls();
@@ -901,6 +902,7 @@ fn stop_motion_goes_through_while_move_j_blocks() {
         client.send_command(&RobotCommand::MoveJ {
             joints_deg: [0.0; 6],
             speed_percent: 10.0,
+            acc_percent: 0.0,
         })
     });
     assert!(eventually(Duration::from_secs(2), || {

@@ -8,6 +8,8 @@ use fairgrasp_deploy::runner::{DeployOptions, Deployment, EpisodeHost, JsonLog, 
 use fairgrasp_deploy::safety::{Fault, SafetyConfig};
 use fairgrasp_deploy::{DeployError, Result};
 use fairgrasp_rl::policies::Policy;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -330,4 +332,90 @@ fn ctrl_c_stops_the_arm() {
     let n = calls.len();
     assert_eq!(calls[n - 2].1, RobotCommand::StopMotion);
     assert_eq!(calls[n - 1].1, RobotCommand::ServoMoveEnd);
+}
+
+/// The home move goes at the caps in force: MoveJ's `vel` and `acc` are the speed scale's
+/// share of the FR5's top joint speed and of the controller's top MoveJ acceleration.
+#[test]
+fn the_move_home_is_capped_by_the_speed_scale() {
+    use fairgrasp_deploy::fairino::fr5;
+    let robot = MockRobot::new(home(), Trouble::None, 0);
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let options = DeployOptions {
+        live: true,
+        episodes: 1,
+        max_steps: Some(2),
+        end_at_success: false,
+        safety: SafetyConfig {
+            speed_scale: 0.25,
+            ..SafetyConfig::default()
+        },
+        ..DeployOptions::default()
+    };
+    let mut d = Deployment::new(
+        Box::new(robot.clone()),
+        policy,
+        Calibration::identity(&io.limits_rad),
+        options,
+        JsonLog::create(None).unwrap(),
+        Arc::new(AtomicBool::new(false)),
+    )
+    .unwrap();
+    d.run(&mut Counting(0), &mut cube()).unwrap();
+    let (speed, acc) = robot
+        .calls()
+        .iter()
+        .find_map(|(_, c)| match c {
+            RobotCommand::MoveJ {
+                speed_percent,
+                acc_percent,
+                ..
+            } => Some((*speed_percent, *acc_percent)),
+            _ => None,
+        })
+        .unwrap();
+    // 180 deg/s × 0.25 and 720 deg/s² × 0.25².
+    assert!(
+        (speed - 100.0 * 45.0 / fr5::MOVE_J_FULL_SPEED_DEG_S).abs() < 1e-9,
+        "{speed}"
+    );
+    assert!(
+        (acc - 100.0 * 45.0 / fr5::MOVE_J_FULL_ACC_DEG_S2[0]).abs() < 1e-9,
+        "{acc}"
+    );
+}
+
+/// An arm left where the straight joint-space line home sweeps a link through the table: the
+/// MoveJ is refused before it is sent, naming the part, though home itself is fine.
+#[test]
+fn a_move_home_through_the_table_is_never_sent() {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let calibration = Calibration::identity(&io.limits_rad);
+    let filter = fairgrasp_deploy::safety::SafetyFilter::new(
+        &SafetyConfig::default(),
+        &calibration.soft_limits(),
+        io.nominal.table_z * 1000.0,
+        io.arm_kinematics(&calibration),
+    )
+    .unwrap();
+    // A clear pose whose way home is not: a seeded search around home.
+    let home = home();
+    let (lower, upper) = filter.joint_limits();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let start = loop {
+        let q: [f64; 6] = std::array::from_fn(|i| {
+            (home[i] + rng.random_range(-90.0..90.0)).clamp(lower[i], upper[i])
+        });
+        if filter.where_outside(&q).is_none() && filter.check_path(&q, &home).is_err() {
+            break q;
+        }
+    };
+    let robot = MockRobot::new(start, Trouble::None, 0);
+    let (mut d, _) = deployment(&robot, true, 4);
+    let report = d.run(&mut Counting(0), &mut cube()).unwrap();
+    let fault = report.fault.expect("refused").to_string();
+    assert!(fault.contains("the move to"), "{fault}");
+    assert!(robot.calls().iter().all(|(_, c)| c.method() != "MoveJ"));
 }

@@ -548,6 +548,7 @@ fn fairino_client_commands_the_twin() {
         .send(&RobotCommand::MoveJ {
             joints_deg: target,
             speed_percent: 30.0,
+            acc_percent: 0.0,
         })
         .unwrap();
     assert!((robot.joints_deg().unwrap()[1] - target[1]).abs() < 1.0);
@@ -578,6 +579,7 @@ fn fairino_client_commands_the_twin() {
         .send(&RobotCommand::MoveJ {
             joints_deg: start,
             speed_percent: 30.0,
+            acc_percent: 0.0,
         })
         .unwrap_err();
     assert!(err.to_string().contains("31"), "{err}");

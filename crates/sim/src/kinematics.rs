@@ -23,6 +23,8 @@ struct ChainJoint {
     kind: JointKind,
     /// Position of this joint's value in the chain's joint vector, `None` for fixed joints.
     dof: Option<usize>,
+    /// The link this joint moves (index into the model's links).
+    child: usize,
 }
 
 /// The joints from the root link to a tip frame, with the movable ones as the joint vector.
@@ -69,6 +71,7 @@ impl SerialChain {
                 axis: Vector3::from(joint.axis),
                 kind: joint.kind,
                 dof,
+                child: joint.child,
             });
         }
         Ok(Self {
@@ -107,6 +110,25 @@ impl SerialChain {
             }
         }
         pose * self.tool
+    }
+
+    /// Visits the frame of every link along the chain at joint vector `q`, root to tip: `visit`
+    /// gets the link's index in the model and its pose in the root link's frame (the tool
+    /// offset is not applied).
+    pub fn for_each_link(&self, q: &[f64], mut visit: impl FnMut(usize, &Isometry3<f64>)) {
+        let mut pose = Isometry3::identity();
+        for joint in &self.joints {
+            pose *= joint.origin;
+            if let Some(i) = joint.dof {
+                pose *= Self::joint_motion(joint, q[i]);
+            }
+            visit(joint.child, &pose);
+        }
+    }
+
+    /// The model's indices of the links the chain moves, root to tip.
+    pub fn links(&self) -> Vec<usize> {
+        self.joints.iter().map(|j| j.child).collect()
     }
 
     /// Geometric Jacobian (linear; angular rows, root frame) of the tool frame, from one pass

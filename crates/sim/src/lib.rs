@@ -4,12 +4,14 @@
 //! - [`model`]: URDF loading and validation (meshes, `package://` paths, clear errors);
 //! - [`robot`]: the model as a multibody with PD/torque control and state queries;
 //! - [`kinematics`]: forward and inverse kinematics of a chain;
+//! - [`envelope`]: spheres covering the arm's shapes, for clearance checks;
 //! - [`scene`]: the grasp scene (arm, gripper, table, objects, bins), stepping, reset and queries;
 //! - [`pick`]: a scripted pick-and-lift controller and the task's success rule;
 //! - [`assets`]: the bundled FR5 and gripper descriptions.
 
 pub mod assets;
 pub mod control;
+pub mod envelope;
 pub mod error;
 pub mod kinematics;
 pub mod math;

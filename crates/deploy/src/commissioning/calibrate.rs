@@ -3,6 +3,7 @@
 
 use crate::calibration::{Calibration, JointCalibration};
 use crate::error::{DeployError, Result};
+use crate::fairino::fr5;
 
 /// Smallest jog (deg) that tells a joint's direction apart from backlash and reading noise.
 const MIN_JOG_DEG: f64 = 3.0;
@@ -47,11 +48,13 @@ pub fn calibration_from_readings(
         let offset_deg = readings.at_home[i] - sign as f64 * readings.home_sim_deg[i];
         let a = sign as f64 * (lo as f64).to_degrees() + offset_deg;
         let b = sign as f64 * (hi as f64).to_degrees() + offset_deg;
+        // Never beyond the arm's own limits, whatever the offset.
+        let (published_lo, published_hi) = fr5::JOINT_LIMITS_DEG[i];
         joints.push(JointCalibration {
             sign,
             offset_deg,
-            min_deg: a.min(b),
-            max_deg: a.max(b),
+            min_deg: a.min(b).max(published_lo),
+            max_deg: a.max(b).min(published_hi),
         });
     }
     let calibration = Calibration {
@@ -103,10 +106,24 @@ mod tests {
                 want[i]
             );
         }
+        // Soft limits: the simulator's (±171.9 deg here) through the mapping, cut to the FR5's
+        // published limits (joint 2 tops out at 85 deg).
         let max = 3.0f64.to_degrees();
         assert!(
-            (c.joints[1].min_deg + max).abs() < 1e-4 && (c.joints[1].max_deg - max).abs() < 1e-4
+            (c.joints[0].min_deg + max).abs() < 1e-4 && (c.joints[0].max_deg - max).abs() < 1e-4
         );
+        assert!((c.joints[1].min_deg + max).abs() < 1e-4 && c.joints[1].max_deg == 85.0);
+        // An offset never carries a soft limit past the published one.
+        let shifted = CalibrationReadings {
+            at_home: readings.at_home.map(|v| v + 30.0),
+            after_jog: readings.after_jog.map(|v| v + 30.0),
+            ..readings
+        };
+        let c = calibration_from_readings(&shifted, &limits, "FR5 test").unwrap();
+        for (i, j) in c.joints.iter().enumerate() {
+            let (lo, hi) = fr5::JOINT_LIMITS_DEG[i];
+            assert!(j.min_deg >= lo && j.max_deg <= hi, "joint {i}: {j:?}");
+        }
     }
 
     #[test]

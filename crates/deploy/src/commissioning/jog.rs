@@ -70,20 +70,18 @@ pub fn jog_test(
         for &joint in &options.joints {
             let i = joint - 1;
             let start = read(link, watchdog)?;
-            let (lower, upper) = filter.joint_limits();
             // The simulator's positive direction, in robot degrees.
             let positive = calibration.joints[i].sign as f64 * options.degrees;
             let mut target = start;
             target[i] += positive;
-            if target[i] > upper[i] || target[i] < lower[i] || filter.tcp_in_box(&target).is_none()
-            {
+            if filter.check_path(&start, &target).is_err() {
                 target[i] = start[i] - positive;
             }
-            if target[i] > upper[i] || target[i] < lower[i] || filter.tcp_in_box(&target).is_none()
-            {
+            if let Err(fault) = filter.check_path(&start, &target) {
                 return Err(Fault::UnsafeStart(format!(
-                    "joint {joint} cannot move {} deg either way inside the limits and the \
-                     workspace box; move the arm nearer the home pose",
+                    "joint {joint} cannot move {} deg either way inside the limits, the \
+                     workspace box and the arm's clearance ({fault}); move the arm nearer the \
+                     home pose",
                     options.degrees
                 )));
             }
@@ -152,6 +150,7 @@ fn move_j(
     let command = RobotCommand::MoveJ {
         joints_deg: *target,
         speed_percent: options.speed_percent,
+        acc_percent: options.speed_percent,
     };
     if !options.live {
         println!("dry run: would send {}", crate::runner::describe(&command));

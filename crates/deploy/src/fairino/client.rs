@@ -236,9 +236,10 @@ impl FairinoClient {
             RobotCommand::MoveJ {
                 joints_deg,
                 speed_percent,
+                acc_percent,
             } => {
                 finite(method, joints_deg)?;
-                finite(method, &[*speed_percent])?;
+                finite(method, &[*speed_percent, *acc_percent])?;
                 // The SDK asks the controller for the Cartesian target first and passes
                 // its answer through as desc_pos.
                 let fk = self.query("GetForwardKin", &[Value::doubles(joints_deg)], call)?;
@@ -252,7 +253,7 @@ impl FairinoClient {
                     Value::Int(0),                 // tool
                     Value::Int(0),                 // user (work object)
                     Value::Double(*speed_percent), // vel
-                    Value::Double(0.0),            // acc
+                    Value::Double(*acc_percent),   // acc
                     Value::Double(100.0),          // ovl
                     Value::doubles(&[0.0; 4]),     // external axes
                     Value::Double(-1.0),           // blendT: -1 blocks until the motion ends

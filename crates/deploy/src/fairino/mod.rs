@@ -7,10 +7,12 @@
 //! - [`udp`]: the real-time command path on UDP 20007 (`cmdType = 1` servo commands).
 //! - [`client::FairinoClient`]: a [`crate::RobotLink`] over them.
 //! - [`error_codes`]: what the controller's error codes mean.
+//! - [`fr5`]: the FR5's published joint limits and speeds.
 
 pub mod client;
 pub mod cnde;
 pub mod error_codes;
+pub mod fr5;
 pub mod udp;
 pub mod xmlrpc;
 

@@ -125,8 +125,9 @@ pub fn describe(command: &RobotCommand) -> String {
         RobotCommand::MoveJ {
             joints_deg,
             speed_percent,
+            acc_percent,
         } => format!(
-            "MoveJ [{}] deg at {speed_percent:.0} %",
+            "MoveJ [{}] deg at {speed_percent:.1} % speed, {acc_percent:.1} % acceleration",
             joints(joints_deg, 2)
         ),
         other => format!("{other:?}"),

@@ -28,7 +28,7 @@ pub use model_io::ModelIo;
 
 use crate::calibration::Calibration;
 use crate::error::{DeployError, Result};
-use crate::kinematics::tcp_forward_kinematics;
+use crate::fairino::fr5;
 use crate::pose_source::PoseSource;
 use crate::robot::{RobotCommand, RobotLink};
 use crate::safety::{Fault, SafetyConfig, SafetyFilter, Watchdog};
@@ -142,7 +142,7 @@ impl Deployment {
             return Err(DeployError::config("--episodes", "must be at least 1"));
         }
         let io = ModelIo::for_policy(&policy)?;
-        let fk = tcp_forward_kinematics(io.chain.clone(), calibration.clone());
+        let fk = io.arm_kinematics(&calibration);
         let servo = options.safety.servo_period_ms / 1000.0;
         let step = io.control_period / options.safety.speed_scale;
         let servo_ticks = ((step / servo - 1e-9).ceil() as u32).max(1);
@@ -341,22 +341,17 @@ impl Deployment {
         })
     }
 
-    /// MoveJ to the model's home pose, checked against the limits and the box first.
+    /// MoveJ to the model's home pose: its whole path checked first (soft limits, the TCP's
+    /// box, the arm's clearance), at the speed and acceleration caps in force.
     fn go_home(&mut self) -> std::result::Result<(), Fault> {
         let home = self.home_deg();
-        let (lower, upper) = self.filter.joint_limits();
-        if (0..6).any(|i| home[i] < lower[i] || home[i] > upper[i])
-            || self.filter.tcp_in_box(&home).is_none()
-        {
-            return Err(Fault::UnsafeStart(format!(
-                "the model's home pose {home:.1?} deg lies outside the soft limits or the \
-                 workspace box; check the calibration"
-            )));
-        }
-        let speed_percent = (100.0 * self.options.safety.speed_scale).clamp(1.0, 100.0);
+        let now = self.checked_state()?.state.joints_deg;
+        self.filter.check_path(&now, &home)?;
+        let (speed, acc, _) = self.filter.caps();
         self.link.send(&RobotCommand::MoveJ {
             joints_deg: home,
-            speed_percent,
+            speed_percent: (100.0 * speed / fr5::MOVE_J_FULL_SPEED_DEG_S).min(100.0),
+            acc_percent: (100.0 * acc / fr5::MOVE_J_FULL_ACC_DEG_S2[0]).min(100.0),
         })
     }
 

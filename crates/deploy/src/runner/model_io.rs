@@ -4,7 +4,9 @@
 //! registry builds it from the model's env id ([`fairgrasp_env::registry::ArmOffer`]), so the
 //! loop serves whichever task the registry offers for deployment.
 
+use crate::calibration::Calibration;
 use crate::error::{DeployError, Result};
+use crate::kinematics::ArmKinematics;
 use crate::safety::SafetyConfig;
 use fairgrasp_env::Env;
 use fairgrasp_env::arm::erased::nominal_env;
@@ -13,6 +15,7 @@ use fairgrasp_env::arm::{
 };
 use fairgrasp_env::arm::{ArmEnvConfig, ArmTaskEnv, ServoConfig, Task, TaskSettings};
 use fairgrasp_env::registry;
+use fairgrasp_env::sim::envelope::Envelope;
 use fairgrasp_env::sim::kinematics::SerialChain;
 use fairgrasp_env::sim::scene::ArmDrive;
 use fairgrasp_env::wrappers::RescaleAction;
@@ -23,6 +26,8 @@ pub struct ModelIo {
     env: RescaleAction<Box<dyn ArmTaskEnv>>,
     /// Base → TCP, the chain the policy's TCP observations came from.
     pub chain: SerialChain,
+    /// Spheres covering the arm's and gripper's shapes, for the safety layer's clearance.
+    pub envelope: Envelope,
     /// The state of the freshly reset env: home pose, table, object's size and rest height.
     pub nominal: ArmState,
     /// What the state estimator knows beyond the controller's readings.
@@ -101,15 +106,23 @@ impl ModelIo {
             .cloned()
             .ok_or_else(|| DeployError::Other("the model's env has no state".into()))?;
         let chain = SerialChain::new(&scene.robot().model, "tcp")?;
+        let envelope = Envelope::new(&scene.robot().model, "tcp")?;
         Ok(Self {
             facts: EstimatorFacts::new(chain.clone(), &nominal),
             chain,
+            envelope,
             control_period: scene.control_period() as f64,
             max_steps: inner.max_episode_steps(),
             limits_rad: scene.arm_limits(),
             nominal,
             env,
         })
+    }
+
+    /// The arm's forward kinematics in the robot's units under `calibration`, for the safety
+    /// filter.
+    pub fn arm_kinematics(&self, calibration: &Calibration) -> ArmKinematics {
+        ArmKinematics::new(self.envelope.clone(), calibration.clone())
     }
 
     /// The task's success rule, fresh for an episode: the rule that ended the model's training

@@ -3,6 +3,12 @@
 use crate::error::{DeployError, Result};
 use serde::{Deserialize, Serialize};
 
+/// The highest joint acceleration cap accepted (deg/s²). FAIRINO publishes no acceleration
+/// limit for the FR5; this is twice the 720 deg/s² the deployment models are trained through
+/// (`[control.servo]`), so the filter never lets set points change speed more than twice as
+/// fast as anything a policy has met, and the arm still brakes from full speed within 125 ms.
+pub const MAX_JOINT_ACC_DEG_S2: f64 = 1440.0;
+
 /// Limits the safety layer enforces on every servo set point, in the robot's units.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -25,6 +31,16 @@ pub struct SafetyConfig {
     /// it. Unset: the height the model was trained with.
     pub table_z_mm: Option<f64>,
     pub table_margin_mm: f64,
+    /// Every part of the arm and gripper (the fingertips, 20 mm past the TCP, included) stays
+    /// this far above the table (mm). 3 mm keeps a top-down TCP 23 mm up, under the 25 mm the
+    /// deployment models are trained to keep it at; the TCP's own margin alone let the
+    /// fingertips 10 mm into the table.
+    pub arm_clearance_mm: f64,
+    /// Every part of the arm stays inside this box (robot base frame, mm): the cell's walls
+    /// and ceiling. The default is the FR5's reach with a tool (922 mm from the shoulder):
+    /// set your cell's.
+    pub cell_min_mm: [f64; 3],
+    pub cell_max_mm: [f64; 3],
     /// The newest state may be at most this old (ms); the stream sends one every 8 ms.
     pub state_deadline_ms: f64,
     /// The servo period (ms): one ServoJ per period, the controller's 8 ms.
@@ -42,6 +58,9 @@ impl Default for SafetyConfig {
             workspace_max_mm: [850.0, 500.0, 700.0],
             table_z_mm: None,
             table_margin_mm: 10.0,
+            arm_clearance_mm: 3.0,
+            cell_min_mm: [-1200.0, -1200.0, -1200.0],
+            cell_max_mm: [1200.0, 1200.0, 1400.0],
             state_deadline_ms: 50.0,
             servo_period_ms: 8.0,
         }
@@ -70,6 +89,15 @@ impl SafetyConfig {
             );
         }
         positive("max_joint_acc_deg_s2", self.max_joint_acc_deg_s2)?;
+        if self.max_joint_acc_deg_s2 > MAX_JOINT_ACC_DEG_S2 {
+            return bad(
+                "max_joint_acc_deg_s2",
+                &format!(
+                    "at most {MAX_JOINT_ACC_DEG_S2} deg/s² (twice the 720 the deployment models \
+                     train through)"
+                ),
+            );
+        }
         if !(self.speed_scale.is_finite() && self.speed_scale > 0.0 && self.speed_scale <= 1.0) {
             return bad("speed_scale", "must be in (0, 1]");
         }
@@ -89,6 +117,24 @@ impl SafetyConfig {
         }
         if !(self.table_margin_mm.is_finite() && self.table_margin_mm >= 0.0) {
             return bad("table_margin_mm", "must be ≥ 0");
+        }
+        if !(self.arm_clearance_mm.is_finite() && self.arm_clearance_mm >= 0.0) {
+            return bad("arm_clearance_mm", "must be ≥ 0");
+        }
+        for k in 0..3 {
+            let (lo, hi) = (self.cell_min_mm[k], self.cell_max_mm[k]);
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return bad(
+                    "cell_min_mm",
+                    "each minimum must be finite and below its maximum (cell_max_mm)",
+                );
+            }
+            if self.workspace_min_mm[k] < lo || self.workspace_max_mm[k] > hi {
+                return bad(
+                    "workspace_min_mm",
+                    "the TCP's workspace box must lie inside the cell (cell_min_mm, cell_max_mm)",
+                );
+            }
         }
         positive("state_deadline_ms", self.state_deadline_ms)?;
         if !(1.0..=16.0).contains(&self.servo_period_ms) {

@@ -31,9 +31,14 @@ pub enum Fault {
         index: usize,
         value: f32,
     },
-    /// Even the strongest allowed braking would take the TCP out of the workspace box.
+    /// Even the strongest allowed braking would take the TCP out of the workspace box, or a
+    /// part of the arm to the table or out of the cell.
     WorkspaceExit {
-        tcp_mm: [f64; 3],
+        /// "TCP", or the model's name of the part (a link, a finger).
+        part: String,
+        at_mm: [f64; 3],
+        /// What it breaks, in words.
+        limit: String,
     },
     /// The measured arm is outside the soft limits or the box, or moving, when the loop starts.
     UnsafeStart(String),
@@ -88,12 +93,12 @@ impl fmt::Display for Fault {
                 "non-finite policy output: value {index} is {value}; the model or its \
                  observation is broken"
             ),
-            Self::WorkspaceExit { tcp_mm } => write!(
-                f,
-                "workspace exit: braking could not keep the TCP in the workspace box (it would \
-                 reach x {:.0}, y {:.0}, z {:.0} mm)",
-                tcp_mm[0], tcp_mm[1], tcp_mm[2]
-            ),
+            Self::WorkspaceExit { limit, .. } => {
+                write!(
+                    f,
+                    "workspace exit: even braking as hard as allowed, {limit}"
+                )
+            }
             Self::UnsafeStart(m) => write!(f, "unsafe start: {m}"),
             Self::Interrupted => write!(f, "interrupted (Ctrl-C)"),
         }

@@ -5,21 +5,20 @@
 //! limits with room to brake, every joint in step along a straight joint-space line, stopping
 //! at the target. The caps and limits hold by construction (see [`JointRamp`]).
 //!
-//! On top, the TCP workspace box is checked on each set point with forward kinematics, and so
-//! is the path braking from it would take (so braking starts before the wall: in the property
+//! On top, each set point is checked with forward kinematics: the TCP inside the workspace
+//! box, and every part of the arm and gripper (the spheres of its envelope: links, flange,
+//! fingers) at least `arm_clearance_mm` above the table and inside the cell's box. So is the
+//! path braking from it would take (so braking starts before the wall: in the property
 //! test checking where braking stops cut the stops at the box from 154 to 0 per million
 //! outputs; checking the path on the way, which bends as each joint brakes on its own, keeps a
-//! policy's targets near the floor from ending in a stop). If any of it leaves the box, the
-//! filter brakes every joint as hard as allowed instead, and if even that leaves the box it
-//! refuses with [`Fault::WorkspaceExit`] (the caller stops the arm) rather than send it.
+//! policy's targets near the floor from ending in a stop). If any of it fails, the filter
+//! brakes every joint as hard as allowed instead, and if even that fails it refuses with
+//! [`Fault::WorkspaceExit`], naming the part (the caller stops the arm) rather than send it.
 
 use super::{Fault, SafetyConfig};
 use crate::error::{DeployError, Result};
+use crate::kinematics::{ArmKinematics, PartOutside};
 use fairgrasp_env::arm::JointRamp;
-
-/// The TCP position (mm, robot base frame) for joint angles in degrees, or `None` when it
-/// cannot be computed (treated as outside the box).
-pub type ForwardKinematics = Box<dyn Fn(&[f64; 6]) -> Option<[f64; 3]> + Send>;
 
 /// Floating-point slack in the checks (deg, mm).
 const EPS: f64 = 1e-9;
@@ -30,6 +29,14 @@ const EPS: f64 = 1e-9;
 /// scale 0.25 still met a workspace stop. About 2 ms of kinematics per control step there.
 const BRAKING_SAMPLES: usize = 1024;
 
+/// No part of the arm lies farther than this from any joint axis (mm): the FR5's links from
+/// base to flange and the gripper to its fingertips add up to 1.45 m. A joint turn of θ rad
+/// moves no point more than θ × this.
+const ARM_REACH_MM: f64 = 1500.0;
+/// How far any part of the arm moves between two points of a move checked by
+/// [`SafetyFilter::check_path`] (mm), at most.
+pub const PATH_STEP_MM: f64 = 1.0;
+
 /// The safety layer's motion filter (see the [module](self) documentation).
 pub struct SafetyFilter {
     ramp: JointRamp,
@@ -37,7 +44,13 @@ pub struct SafetyFilter {
     upper: [f64; 6],
     box_min: [f64; 3],
     box_max: [f64; 3],
-    fk: ForwardKinematics,
+    /// The table's height and the lowest any part of the arm may reach: table +
+    /// `arm_clearance_mm` (mm).
+    table_z: f64,
+    floor_z: f64,
+    cell_min: [f64; 3],
+    cell_max: [f64; 3],
+    arm: ArmKinematics,
 }
 
 fn six(v: &[f64]) -> [f64; 6] {
@@ -52,7 +65,7 @@ impl SafetyFilter {
         config: &SafetyConfig,
         soft_limits_deg: &[(f64, f64)],
         table_z_mm: f64,
-        fk: ForwardKinematics,
+        arm: ArmKinematics,
     ) -> Result<Self> {
         config.validate()?;
         if soft_limits_deg.len() != 6 {
@@ -96,7 +109,11 @@ impl SafetyFilter {
             upper,
             box_min,
             box_max: config.workspace_max_mm,
-            fk,
+            table_z,
+            floor_z: table_z + config.arm_clearance_mm,
+            cell_min: config.cell_min_mm,
+            cell_max: config.cell_max_mm,
+            arm,
         })
     }
 
@@ -120,12 +137,49 @@ impl SafetyFilter {
         self.ramp.last().map(|(p, v)| (six(p), six(v)))
     }
 
+    /// The lowest any part of the arm may reach (mm), and the cell's box (mm).
+    pub fn arm_bounds(&self) -> (f64, [f64; 3], [f64; 3]) {
+        (self.floor_z, self.cell_min, self.cell_max)
+    }
+
+    /// The arm's forward kinematics the checks use.
+    pub fn kinematics(&self) -> &ArmKinematics {
+        &self.arm
+    }
+
     /// The TCP (mm) for joint angles (deg), when it lies inside the box.
     pub fn tcp_in_box(&self, joints: &[f64; 6]) -> Option<[f64; 3]> {
-        let tcp = (self.fk)(joints)?;
+        let tcp = self.arm.tcp_mm(joints)?;
         (0..3)
             .all(|k| tcp[k] >= self.box_min[k] - EPS && tcp[k] <= self.box_max[k] + EPS)
             .then_some(tcp)
+    }
+
+    /// The first part of the arm below the table's clearance or outside the cell's box at
+    /// joint angles (deg), or `None` when the whole arm is clear.
+    pub fn part_outside(&self, joints: &[f64; 6]) -> Option<PartOutside> {
+        let (floor, lo, hi) = (self.floor_z - EPS, self.cell_min, self.cell_max);
+        self.arm.first_part_outside(joints, |c, r| {
+            c[2] - r >= floor && (0..3).all(|k| c[k] - r >= lo[k] - EPS && c[k] + r <= hi[k] + EPS)
+        })
+    }
+
+    /// Why the arm may not be at `joints` (deg): the TCP outside the workspace box or a part
+    /// outside the table's clearance or the cell, or `None` when it may.
+    pub fn where_outside(&self, joints: &[f64; 6]) -> Option<PartOutside> {
+        if self.tcp_in_box(joints).is_none() {
+            let at_mm = self.arm.tcp_mm(joints).unwrap_or([f64::NAN; 3]);
+            return Some(PartOutside {
+                part: "TCP".into(),
+                at_mm,
+            });
+        }
+        self.part_outside(joints)
+    }
+
+    /// Whether the arm may be at `joints` (deg): see [`Self::where_outside`].
+    fn clear(&self, joints: &[f64; 6]) -> bool {
+        self.tcp_in_box(joints).is_some() && self.part_outside(joints).is_none()
     }
 
     /// Starts a motion from the measured joints (deg) at rest: they must be inside the soft
@@ -142,12 +196,10 @@ impl SafetyFilter {
                 )));
             }
         }
-        if self.tcp_in_box(measured).is_none() {
-            let tcp = (self.fk)(measured).unwrap_or([f64::NAN; 3]);
+        if let Some(outside) = self.where_outside(measured) {
             return Err(Fault::UnsafeStart(format!(
-                "the TCP is at ({:.0}, {:.0}, {:.0}) mm, outside the workspace box \
-                 {:?}–{:?} mm",
-                tcp[0], tcp[1], tcp[2], self.box_min, self.box_max
+                "{}; move the arm clear with the teach pendant",
+                self.describe(&outside)
             )));
         }
         self.ramp.start(measured);
@@ -177,18 +229,84 @@ impl SafetyFilter {
             .ramp
             .braking_path(&step, BRAKING_SAMPLES)
             .expect("started");
-        if self.tcp_in_box(&step).is_none()
-            || self.tcp_in_box(&stop_point).is_none()
-            || braking.iter().any(|q| self.tcp_in_box(&six(q)).is_none())
+        if !self.clear(&step)
+            || !self.clear(&stop_point)
+            || braking.iter().any(|q| !self.clear(&six(q)))
         {
             step = six(&self.ramp.propose_brake().expect("started"));
-            if self.tcp_in_box(&step).is_none() {
-                let tcp_mm = (self.fk)(&step).unwrap_or([f64::NAN; 3]);
+            if let Some(outside) = self.where_outside(&step) {
                 self.ramp.stop();
-                return Err(Fault::WorkspaceExit { tcp_mm });
+                return Err(Fault::WorkspaceExit {
+                    part: outside.part.clone(),
+                    at_mm: outside.at_mm,
+                    limit: self.describe(&outside),
+                });
             }
         }
         self.ramp.commit(step.to_vec());
         Ok(step)
+    }
+
+    /// Checks a point-to-point move (MoveJ: every joint in step along the straight joint-space
+    /// line) from `from` to `to` (deg): every point of it inside the soft limits, the TCP in
+    /// the box and the whole arm clear. Points are checked so densely that nothing of the arm
+    /// moves more than [`PATH_STEP_MM`] between two of them.
+    pub fn check_path(&self, from: &[f64; 6], to: &[f64; 6]) -> std::result::Result<(), Fault> {
+        let turn: f64 = (0..6).map(|i| (to[i] - from[i]).abs()).sum();
+        if !turn.is_finite() {
+            return Err(Fault::UnsafeStart(format!(
+                "a move from {from:.1?} to {to:.1?} deg is not finite"
+            )));
+        }
+        let n = (turn.to_radians() * ARM_REACH_MM / PATH_STEP_MM)
+            .ceil()
+            .max(1.0) as usize;
+        for k in 0..=n {
+            let s = k as f64 / n as f64;
+            let q: [f64; 6] = std::array::from_fn(|i| from[i] + (to[i] - from[i]) * s);
+            if let Some(i) =
+                (0..6).find(|&i| q[i] < self.lower[i] - EPS || q[i] > self.upper[i] + EPS)
+            {
+                return Err(Fault::UnsafeStart(format!(
+                    "the move to {to:.1?} deg takes joint {} to {:.2} deg, outside its soft \
+                     limits [{:.2}, {:.2}] deg (with the margin)",
+                    i + 1,
+                    q[i],
+                    self.lower[i],
+                    self.upper[i]
+                )));
+            }
+            if let Some(outside) = self.where_outside(&q) {
+                return Err(Fault::UnsafeStart(format!(
+                    "the move to {to:.1?} deg would pass where {} ({:.0} % of the way); move \
+                     the arm with the teach pendant or change the home pose",
+                    self.describe(&outside),
+                    100.0 * s
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// What a part outside breaks, in words.
+    fn describe(&self, outside: &PartOutside) -> String {
+        let [x, y, z] = outside.at_mm;
+        if outside.part == "TCP" {
+            format!(
+                "the TCP at ({x:.0}, {y:.0}, {z:.0}) mm is outside the workspace box \
+                 {:?}–{:?} mm",
+                self.box_min, self.box_max
+            )
+        } else {
+            format!(
+                "the {} (around ({x:.0}, {y:.0}, {z:.0}) mm) comes within {:.0} mm of the table \
+                 (at {:.0} mm) or leaves the cell {:?}–{:?} mm",
+                outside.part,
+                self.floor_z - self.table_z,
+                self.table_z,
+                self.cell_min,
+                self.cell_max
+            )
+        }
     }
 }

@@ -42,6 +42,7 @@
 
 use super::gripper::Gripper;
 use super::motion::{Joints, Profile, ServoStep, max_gap, rate_limited};
+use crate::fairino::fr5;
 use crate::robot::RobotState;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::{Isometry3, Translation3, UnitQuaternion};
@@ -65,11 +66,6 @@ pub mod codes {
 
 /// `(main_code, sub_code)` while the e-stop is pressed, and after until reset.
 pub const MAIN_CODE_EMERGENCY_STOP: (i32, i32) = (31, 1);
-
-/// The FR5's joint speed limits (deg/s): 3.15 rad/s for j1–j3, 3.2 rad/s for j4–j6.
-pub const FR5_MAX_SPEED_DEG: Joints = [180.48, 180.48, 180.48, 183.35, 183.35, 183.35];
-/// Joint acceleration at 100 % (deg/s²): the twin's choice, full speed in half a second.
-pub const FR5_MAX_ACC_DEG: Joints = [360.0, 360.0, 360.0, 366.0, 366.0, 366.0];
 
 /// How the controller is found at power-on.
 #[derive(Clone, Debug, PartialEq)]
@@ -110,8 +106,8 @@ impl ControllerConfig {
                 let (lo, hi) = limits_rad.get(j).copied().unwrap_or((-3.05, 3.05));
                 (lo.to_degrees(), hi.to_degrees())
             }),
-            max_speed_deg: FR5_MAX_SPEED_DEG,
-            max_acc_deg: FR5_MAX_ACC_DEG,
+            max_speed_deg: fr5::MAX_SPEED_DEG_S,
+            max_acc_deg: fr5::MOVE_J_FULL_ACC_DEG_S2,
             settle_timeout: 1.0,
             start,
         }
@@ -145,7 +141,9 @@ struct Fault {
 struct QueuedMove {
     ticket: u64,
     target: Joints,
-    scale: f64,
+    /// Shares of the top joint speed and acceleration.
+    speed_scale: f64,
+    acc_scale: f64,
 }
 
 #[derive(Clone, Debug)]
@@ -390,14 +388,23 @@ impl Controller {
             .all(|(v, (lo, hi))| v.is_finite() && *v >= lo - 1e-9 && *v <= hi + 1e-9)
     }
 
-    /// `MoveJ`: queues a move to `target` at `vel` % and `ovl` % of the maximum speed (times the
-    /// global override). Returns the ticket to wait on.
-    pub fn move_j(&mut self, now: f64, target: Joints, vel: f64, ovl: f64) -> Result<u64, i32> {
+    /// `MoveJ`: queues a move to `target` at `vel` % of the top joint speed and `acc` % of the
+    /// top acceleration, both times `ovl` % and the global override (`acc` 0, the SDK's
+    /// default: the acceleration follows `vel`). Returns the ticket to wait on.
+    pub fn move_j(
+        &mut self,
+        now: f64,
+        target: Joints,
+        vel: f64,
+        acc: f64,
+        ovl: f64,
+    ) -> Result<u64, i32> {
         if let Some(code) = self.motion_refusal() {
             return Err(code);
         }
         let in_range = |v: f64| v.is_finite() && v > 0.0 && v <= 100.0;
-        if !self.within_limits(&target) || !in_range(vel) || !in_range(ovl) {
+        let acc_ok = acc == 0.0 || in_range(acc);
+        if !self.within_limits(&target) || !in_range(vel) || !acc_ok || !in_range(ovl) {
             return Err(codes::PARAM_VALUE);
         }
         if self.servo_session {
@@ -405,11 +412,13 @@ impl Controller {
         }
         let ticket = self.next_ticket;
         self.next_ticket += 1;
-        let scale = vel / 100.0 * ovl / 100.0 * self.speed_percent / 100.0;
+        let overall = ovl / 100.0 * self.speed_percent / 100.0;
+        let acc = if acc == 0.0 { vel } else { acc };
         self.queue.push_back(QueuedMove {
             ticket,
             target,
-            scale,
+            speed_scale: vel / 100.0 * overall,
+            acc_scale: acc / 100.0 * overall,
         });
         if self.active.is_none() {
             self.start_next(now);
@@ -422,8 +431,8 @@ impl Controller {
         self.advance(now);
         self.servo_step = None;
         if let Some(next) = self.queue.pop_front() {
-            let speed = self.config.max_speed_deg.map(|v| v * next.scale);
-            let acc = self.config.max_acc_deg.map(|v| v * next.scale);
+            let speed = self.config.max_speed_deg.map(|v| v * next.speed_scale);
+            let acc = self.config.max_acc_deg.map(|v| v * next.acc_scale);
             self.active = Some(ActiveMove {
                 ticket: next.ticket,
                 profile: Profile::new(self.setpoint, next.target, now, &speed, &acc),

@@ -88,20 +88,20 @@ fn enable_and_mode_gate_motion() {
         gripper_active: false,
     });
     assert_eq!(
-        b.c.move_j(0.0, target(), 50.0, 100.0),
+        b.c.move_j(0.0, target(), 50.0, 0.0, 100.0),
         Err(codes::NOT_ENABLED)
     );
     assert_eq!(b.c.servo_start(), codes::NOT_ENABLED);
     assert_eq!(b.c.enable(0.0, true), codes::OK);
     assert_eq!(
-        b.c.move_j(0.0, target(), 50.0, 100.0),
+        b.c.move_j(0.0, target(), 50.0, 0.0, 100.0),
         Err(codes::EXECUTION_FAILED),
         "manual mode refuses remote motion"
     );
     assert_eq!(b.c.set_mode(0.0, 7), codes::PARAM_VALUE);
     assert_eq!(b.c.set_mode(0.0, 0), codes::OK);
     assert!(b.c.state().robot_mode == 0 && b.c.state().enabled);
-    let ticket = b.c.move_j(0.0, target(), 50.0, 100.0).unwrap();
+    let ticket = b.c.move_j(0.0, target(), 50.0, 0.0, 100.0).unwrap();
     // Disabling mid-move aborts it with "not enabled".
     b.run(0.1);
     assert_eq!(b.c.enable(b.t, false), codes::OK);
@@ -113,7 +113,7 @@ fn enable_and_mode_gate_motion() {
 fn move_j_reports_moving_then_done_and_arrives() {
     let mut b = Bench::started();
     assert!(b.c.state().motion_done);
-    let ticket = b.c.move_j(b.t, target(), 20.0, 100.0).unwrap();
+    let ticket = b.c.move_j(b.t, target(), 20.0, 0.0, 100.0).unwrap();
     b.tick_with_object(0.0);
     let s = b.c.state();
     assert!(!s.motion_done && s.robot_state == 2, "moving: {s:?}");
@@ -128,7 +128,7 @@ fn move_j_reports_moving_then_done_and_arrives() {
     // SetSpeed halves the speed: the move back takes about twice as long.
     assert_eq!(b.c.set_speed(10.0), codes::OK);
     assert_eq!(b.c.set_speed(0.0), codes::PARAM_VALUE);
-    let back = b.c.move_j(b.t, HOME, 20.0, 100.0).unwrap();
+    let back = b.c.move_j(b.t, HOME, 20.0, 0.0, 100.0).unwrap();
     let (_, slower) = b.wait(back);
     assert!(slower > 8.0 * seconds, "{slower} vs {seconds}");
 }
@@ -138,17 +138,20 @@ fn move_j_checks_its_arguments_and_queues() {
     let mut b = Bench::started();
     let mut over = target();
     over[2] = 400.0;
-    assert_eq!(b.c.move_j(0.0, over, 20.0, 100.0), Err(codes::PARAM_VALUE));
     assert_eq!(
-        b.c.move_j(0.0, target(), 0.0, 100.0),
+        b.c.move_j(0.0, over, 20.0, 0.0, 100.0),
         Err(codes::PARAM_VALUE)
     );
     assert_eq!(
-        b.c.move_j(0.0, target(), f64::NAN, 100.0),
+        b.c.move_j(0.0, target(), 0.0, 0.0, 100.0),
         Err(codes::PARAM_VALUE)
     );
-    let first = b.c.move_j(0.0, target(), 100.0, 100.0).unwrap();
-    let second = b.c.move_j(0.0, HOME, 100.0, 100.0).unwrap();
+    assert_eq!(
+        b.c.move_j(0.0, target(), f64::NAN, 0.0, 100.0),
+        Err(codes::PARAM_VALUE)
+    );
+    let first = b.c.move_j(0.0, target(), 100.0, 0.0, 100.0).unwrap();
+    let second = b.c.move_j(0.0, HOME, 100.0, 0.0, 100.0).unwrap();
     assert_eq!(b.wait(first).0, codes::OK);
     assert_eq!(
         b.c.outcome(second),
@@ -170,7 +173,7 @@ fn a_servo_session_moves_the_arm_along_its_targets() {
     );
     assert_eq!(b.c.servo_start(), codes::OK);
     assert_eq!(
-        b.c.move_j(b.t, target(), 20.0, 100.0),
+        b.c.move_j(b.t, target(), 20.0, 0.0, 100.0),
         Err(codes::EXECUTION_FAILED)
     );
     for _ in 0..100 {
@@ -220,7 +223,7 @@ fn a_servo_session_moves_the_arm_along_its_targets() {
 #[test]
 fn stop_motion_aborts_a_move() {
     let mut b = Bench::started();
-    let ticket = b.c.move_j(b.t, target(), 20.0, 100.0).unwrap();
+    let ticket = b.c.move_j(b.t, target(), 20.0, 0.0, 100.0).unwrap();
     b.run(0.3);
     let before = b.q;
     assert_eq!(b.c.stop_motion(b.t), codes::OK);
@@ -269,7 +272,7 @@ fn the_gripper_must_be_activated_and_reports_its_motion() {
 #[test]
 fn the_e_stop_stops_refuses_and_shows_in_main_code() {
     let mut b = Bench::started();
-    let ticket = b.c.move_j(b.t, target(), 20.0, 100.0).unwrap();
+    let ticket = b.c.move_j(b.t, target(), 20.0, 0.0, 100.0).unwrap();
     b.run(0.2);
     b.c.set_estop(b.t, true);
     assert_eq!(b.c.outcome(ticket), Some(codes::EMERGENCY_STOP));
@@ -277,7 +280,7 @@ fn the_e_stop_stops_refuses_and_shows_in_main_code() {
     assert!(s.emergency_stop);
     assert_eq!((s.main_code, s.sub_code), MAIN_CODE_EMERGENCY_STOP);
     assert_eq!(
-        b.c.move_j(b.t, target(), 20.0, 100.0),
+        b.c.move_j(b.t, target(), 20.0, 0.0, 100.0),
         Err(codes::EMERGENCY_STOP)
     );
     assert_eq!(b.c.servo_start(), codes::EMERGENCY_STOP);
@@ -288,13 +291,13 @@ fn the_e_stop_stops_refuses_and_shows_in_main_code() {
     assert_eq!(b.c.reset_errors(), codes::EXECUTION_FAILED, "still pressed");
     b.c.set_estop(b.t, false);
     assert_eq!(
-        b.c.move_j(b.t, target(), 20.0, 100.0),
+        b.c.move_j(b.t, target(), 20.0, 0.0, 100.0),
         Err(codes::EXECUTION_FAILED),
         "the fault stays until reset"
     );
     assert_eq!(b.c.reset_errors(), codes::OK);
     assert_eq!(b.c.state().main_code, 0);
-    assert!(b.c.move_j(b.t, target(), 20.0, 100.0).is_ok());
+    assert!(b.c.move_j(b.t, target(), 20.0, 0.0, 100.0).is_ok());
 }
 
 #[test]
@@ -304,7 +307,7 @@ fn a_safety_stop_refuses_motion_with_99() {
     b.c.set_safety_stop(b.t, [false, true]);
     assert_eq!(b.c.servo_j(b.t, HOME, 0.008), codes::SAFETY_STOP);
     assert_eq!(
-        b.c.move_j(b.t, target(), 20.0, 100.0),
+        b.c.move_j(b.t, target(), 20.0, 0.0, 100.0),
         Err(codes::SAFETY_STOP)
     );
     assert_eq!(
@@ -318,13 +321,13 @@ fn a_safety_stop_refuses_motion_with_99() {
         codes::EXECUTION_FAILED,
         "the stop ended the session"
     );
-    assert!(b.c.move_j(b.t, target(), 20.0, 100.0).is_ok());
+    assert!(b.c.move_j(b.t, target(), 20.0, 0.0, 100.0).is_ok());
 }
 
 #[test]
 fn injected_faults_stop_the_arm_and_reset_when_resettable() {
     let mut b = Bench::started();
-    let ticket = b.c.move_j(b.t, target(), 20.0, 100.0).unwrap();
+    let ticket = b.c.move_j(b.t, target(), 20.0, 0.0, 100.0).unwrap();
     b.run(0.1);
     b.c.set_fault(b.t, 5, 7, false);
     assert_eq!(b.c.outcome(ticket), Some(codes::EXECUTION_FAILED));

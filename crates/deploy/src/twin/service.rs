@@ -345,8 +345,11 @@ impl TwinService {
     fn move_j(&self, now: f64, a: &Args) -> Result<i32, i32> {
         a.count(11)?;
         let target = a.six(0)?;
-        let (vel, ovl, blend) = (a.f64(4)?, a.f64(6)?, a.f64(8)?);
-        let ticket = self.shared.controller().move_j(now, target, vel, ovl)?;
+        let (vel, acc, ovl, blend) = (a.f64(4)?, a.f64(5)?, a.f64(6)?, a.f64(8)?);
+        let ticket = self
+            .shared
+            .controller()
+            .move_j(now, target, vel, acc, ovl)?;
         if blend >= 0.0 {
             return Ok(codes::OK);
         }

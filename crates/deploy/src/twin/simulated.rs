@@ -155,7 +155,8 @@ impl Inner {
             RobotCommand::MoveJ {
                 joints_deg,
                 speed_percent,
-            } => match c.move_j(now, *joints_deg, *speed_percent, 100.0) {
+                acc_percent,
+            } => match c.move_j(now, *joints_deg, *speed_percent, *acc_percent, 100.0) {
                 Err(code) => code,
                 Ok(ticket) => {
                     let until = now + MOVE_J_LIMIT;

@@ -263,7 +263,7 @@ mod tests {
         }
 
         fn move_j(&mut self, target: [f64; 6], vel: f64) {
-            let ticket = self.c.move_j(self.t, target, vel, 100.0).unwrap();
+            let ticket = self.c.move_j(self.t, target, vel, 0.0, 100.0).unwrap();
             for _ in 0..5000 {
                 if let Some(code) = self.c.outcome(ticket) {
                     assert_eq!(code, codes::OK);
