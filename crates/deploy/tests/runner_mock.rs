@@ -223,7 +223,9 @@ fn a_live_run_enables_homes_and_streams_servo_set_points() {
         ["MoveJ", "MoveGripper", "ServoMoveStart"]
     );
     let servos = first_episode.iter().filter(|n| **n == "ServoJ").count();
-    assert_eq!(servos, 6 * ticks);
+    // The steps' set points, then at most a quarter second of braking to rest (180 deg/s at
+    // 720 deg/s², 6.67 ms periods).
+    assert!(servos >= 6 * ticks && servos <= 6 * ticks + 38, "{servos}");
     assert_eq!(names.iter().filter(|n| **n == "ServoMoveEnd").count(), 2);
 }
 
@@ -244,12 +246,18 @@ fn the_servo_stream_keeps_its_period_when_replies_are_slower_than_it() {
             _ => None,
         })
         .collect();
-    // Every tick of the 200 steps is covered by a set point, none given up.
-    let covered: f64 = servos
-        .iter()
-        .map(|(_, cmd_t)| (cmd_t / period).round())
-        .sum();
-    assert_eq!(covered as u64, 200 * ticks);
+    // Every tick of the 200 steps is covered by a set point, none given up: no send covers
+    // ticks of two steps, so the sends' ticks add up to the steps' exactly (braking to rest
+    // follows).
+    let mut sum = 0;
+    let last_of_steps = (servos.iter())
+        .position(|(_, cmd_t)| {
+            sum += (cmd_t / period).round() as u64;
+            sum == 200 * ticks
+        })
+        .expect("the sends skip over the last step's final tick");
+    let servos = &servos[..=last_of_steps];
+    let covered = (200 * ticks) as f64;
     // The ticks kept their schedule: a send goes out once the last tick it covers is due.
     let span = (servos.last().unwrap().0 - servos[0].0).as_secs_f64();
     let measured_period = span / (covered - 1.0);
@@ -418,4 +426,50 @@ fn a_move_home_through_the_table_is_never_sent() {
     let fault = report.fault.expect("refused").to_string();
     assert!(fault.contains("the move to"), "{fault}");
     assert!(robot.calls().iter().all(|(_, c)| c.method() != "MoveJ"));
+}
+
+/// An episode cut off mid-motion (two steps of a policy reaching for the cube) brakes to rest
+/// before ServoMoveEnd: the session never ends with the set points moving.
+#[test]
+fn the_servo_session_ends_with_the_arm_at_rest() {
+    let robot = MockRobot::new(home(), Trouble::None, 0);
+    let (mut d, _) = deployment_of(&robot, true, 2, 1);
+    let period = d.servo_period().as_secs_f64();
+    let report = d.run(&mut Counting(0), &mut cube()).unwrap();
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    let calls = robot.calls();
+    let end = calls
+        .iter()
+        .position(|(_, c)| c.method() == "ServoMoveEnd")
+        .unwrap();
+    let set_points: Vec<[f64; 6]> = calls[..end]
+        .iter()
+        .filter_map(|(_, c)| match c {
+            RobotCommand::ServoJ { joints_deg, .. } => Some(*joints_deg),
+            _ => None,
+        })
+        .collect();
+    let n = set_points.len();
+    let speed = |k: usize| -> f64 {
+        (0..6)
+            .map(|i| ((set_points[k][i] - set_points[k - 1][i]) / period).abs())
+            .fold(0.0, f64::max)
+    };
+    // It was moving when the steps ran out, and the last set point repeats none: braking
+    // ended exactly at rest, its speed falling every period.
+    let moving = (1..n).map(speed).fold(0.0, f64::max);
+    assert!(moving > 1.0, "the arm never moved ({moving} deg/s)");
+    let last = speed(n - 1);
+    let stopping = (n.saturating_sub(8).max(1)..n)
+        .map(speed)
+        .collect::<Vec<_>>();
+    assert!(last < 5.0, "still moving at {last} deg/s: {stopping:?}");
+    assert!(
+        stopping
+            .windows(2)
+            .rev()
+            .take(3)
+            .all(|w| w[1] <= w[0] + 1e-6),
+        "{stopping:?}"
+    );
 }

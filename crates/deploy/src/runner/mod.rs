@@ -384,6 +384,27 @@ impl Deployment {
         Ok(())
     }
 
+    /// Brakes the arm to rest on the servo schedule (the filter's braking, every joint as hard as
+    /// allowed), so a servo session never ends with the set points still moving.
+    fn come_to_rest(&mut self, clock: &mut ServoClock) -> std::result::Result<(), Fault> {
+        while let Some(mut set_point) = self.filter.brake() {
+            self.link.sleep_until(clock.next_due());
+            self.checked_state()?;
+            let n = clock.take_due(self.link.now(), u64::MAX);
+            for _ in 1..n {
+                match self.filter.brake() {
+                    Some(next) => set_point = next,
+                    None => break,
+                }
+            }
+            self.link.send(&RobotCommand::ServoJ {
+                joints_deg: set_point,
+                cmd_t: (self.tick.as_secs_f64() * n as f64).min(MAX_CMD_T),
+            })?;
+        }
+        Ok(())
+    }
+
     /// One episode from home: returns when its steps are done, or the fault.
     fn episode(
         &mut self,
@@ -476,6 +497,7 @@ impl Deployment {
             let until = (step as u64 + 1) * self.servo_ticks as u64;
             self.stream(&mut clock, &target, until)?;
         }
+        self.come_to_rest(&mut clock)?;
         self.link.send(&RobotCommand::ServoMoveEnd)?;
         self.gripper(true)?;
         Ok(EpisodeReport {

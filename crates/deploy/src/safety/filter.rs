@@ -247,6 +247,19 @@ impl SafetyFilter {
         Ok(step)
     }
 
+    /// The next set point braking every joint as hard as allowed, or `None` once the ramp is at
+    /// rest (or was never started). Every set point sent had its braking path checked, so
+    /// braking from it stays inside everything the filter keeps.
+    pub fn brake(&mut self) -> Option<[f64; 6]> {
+        let (_, velocity) = self.ramp.last()?;
+        if velocity.iter().all(|v| *v == 0.0) {
+            return None;
+        }
+        let step = self.ramp.propose_brake()?;
+        self.ramp.commit(step.clone());
+        Some(six(&step))
+    }
+
     /// Checks a point-to-point move (MoveJ: every joint in step along the straight joint-space
     /// line) from `from` to `to` (deg): every point of it inside the soft limits, the TCP in
     /// the box and the whole arm clear. Points are checked so densely that nothing of the arm
