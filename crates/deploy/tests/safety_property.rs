@@ -56,7 +56,9 @@ const PUBLISHED_LIMITS: [(f64, f64); 6] = [
     (-3.0543, 3.0543),
 ];
 
-/// The FR5's published chain (origin xyz in m, rpy in rad; every joint turns about its z).
+/// The FR5's published chain (origin xyz in m, rpy in rad; every joint turns about its z),
+/// with its figures as published (1.5708, not π/2).
+#[allow(clippy::approx_constant)]
 const CHAIN: [([f64; 3], [f64; 3]); 6] = [
     ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
     ([0.0, 0.0, 0.152], [1.5708, 0.0, 0.0]),
