@@ -35,6 +35,12 @@ pub struct RobotState {
     pub gripper_motion_done: bool,
     pub gripper_active: bool,
     pub gripper_fault: i32,
+    /// The controller detected a collision (`collision_state`).
+    pub collision: bool,
+    /// The controller's clock when it took the state (`robot_time`, ms since the start of the
+    /// month), when the stream carries it: a clock that stops while frames keep coming means
+    /// they carry old data.
+    pub controller_clock_ms: Option<i64>,
 }
 
 impl Default for RobotState {
@@ -55,6 +61,8 @@ impl Default for RobotState {
             gripper_motion_done: true,
             gripper_active: true,
             gripper_fault: 0,
+            collision: false,
+            controller_clock_ms: None,
         }
     }
 }

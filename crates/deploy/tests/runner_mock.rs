@@ -2,7 +2,7 @@
 //! the command sequence, dry runs, and each fault stopping the arm with nothing sent after.
 
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::pose_source::{FixedPose, PoseMessage};
+use fairgrasp_deploy::pose_source::{FixedPose, PoseMessage, PoseSource, ReceivedPose};
 use fairgrasp_deploy::robot::{RobotCommand, RobotLink, RobotState, StampedState};
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo};
 use fairgrasp_deploy::safety::{Fault, SafetyConfig};
@@ -507,4 +507,43 @@ fn the_servo_session_ends_with_the_arm_at_rest() {
             .all(|w| w[1] <= w[0] + 1e-6),
         "{stopping:?}"
     );
+}
+
+/// A perception that stops sending: its last pose, received once and never again.
+struct SilentPerception(ReceivedPose);
+
+impl PoseSource for SilentPerception {
+    fn latest(&mut self) -> Result<Option<ReceivedPose>> {
+        Ok(Some(self.0.clone()))
+    }
+}
+
+/// A pose that stops updating stops the arm once it is older than `pose_deadline_ms`; it was
+/// acted on at any age.
+#[test]
+fn a_pose_older_than_its_deadline_stops_the_arm() {
+    let robot = MockRobot::new(home(), Trouble::None, 0);
+    let (mut d, _) = deployment_of(&robot, true, 40, 1);
+    let mut pose = SilentPerception(ReceivedPose {
+        message: cube().0,
+        received_at: Instant::now(),
+    });
+    let report = d.run(&mut Counting(0), &mut pose).unwrap();
+    match report.fault {
+        Some(Fault::StalePose {
+            age_ms,
+            deadline_ms,
+        }) => {
+            assert_eq!(deadline_ms, 250.0);
+            assert!((250.0..300.0).contains(&age_ms), "{age_ms}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // Nothing moved the arm after the stop.
+    let calls = robot.calls();
+    let stop = calls
+        .iter()
+        .position(|(_, c)| c.method() == "StopMotion")
+        .unwrap();
+    assert!(calls[stop..].iter().all(|(_, c)| !c.moves()));
 }

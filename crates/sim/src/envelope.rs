@@ -318,11 +318,12 @@ mod tests {
         let after = forearm(&q);
         assert!((after - before).abs() > 0.01, "{before} -> {after}");
         // A check refusing below a height names the part it refused, and where it is.
-        let lowest = lowest_by_part(&envelope, &q)
-            .into_iter()
-            .fold((String::new(), f64::INFINITY), |a, b| {
+        let lowest = lowest_by_part(&envelope, &q).into_iter().fold(
+            (String::new(), f64::INFINITY),
+            |a, b| {
                 if b.1 < a.1 { b } else { a }
-            });
+            },
+        );
         let (part, centre) = envelope
             .first_outside(&q, |c, r| c.z - r >= lowest.1 + 1e-9)
             .unwrap();

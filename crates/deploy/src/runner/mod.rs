@@ -448,6 +448,14 @@ impl Deployment {
                     .latest()
                     .map_err(|e| Fault::StreamFailed(format!("object pose: {e}")))?
                 {
+                    let age = self.link.now().saturating_duration_since(p.received_at);
+                    let deadline_ms = self.options.safety.pose_deadline_ms;
+                    if age.as_secs_f64() * 1000.0 > deadline_ms {
+                        return Err(Fault::StalePose {
+                            age_ms: age.as_secs_f64() * 1000.0,
+                            deadline_ms,
+                        });
+                    }
                     object = p.message;
                 }
                 state = reader.estimate(

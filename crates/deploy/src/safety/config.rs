@@ -41,8 +41,12 @@ pub struct SafetyConfig {
     /// set your cell's.
     pub cell_min_mm: [f64; 3],
     pub cell_max_mm: [f64; 3],
-    /// The newest state may be at most this old (ms); the stream sends one every 8 ms.
+    /// The newest state may be at most this old (ms); the stream sends one every 8 ms. Frames
+    /// whose controller clock has stood still this long are old too.
     pub state_deadline_ms: f64,
+    /// The newest object pose may be at most this old (ms); a perception at 30 Hz sends one
+    /// every 33 ms.
+    pub pose_deadline_ms: f64,
     /// The servo period (ms): one ServoJ per period, the controller's 8 ms.
     pub servo_period_ms: f64,
 }
@@ -62,6 +66,7 @@ impl Default for SafetyConfig {
             cell_min_mm: [-1200.0, -1200.0, -1200.0],
             cell_max_mm: [1200.0, 1200.0, 1400.0],
             state_deadline_ms: 50.0,
+            pose_deadline_ms: 250.0,
             servo_period_ms: 8.0,
         }
     }
@@ -137,6 +142,7 @@ impl SafetyConfig {
             }
         }
         positive("state_deadline_ms", self.state_deadline_ms)?;
+        positive("pose_deadline_ms", self.pose_deadline_ms)?;
         if !(1.0..=16.0).contains(&self.servo_period_ms) {
             return bad(
                 "servo_period_ms",

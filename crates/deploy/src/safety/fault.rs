@@ -10,6 +10,19 @@ pub enum Fault {
         age_ms: f64,
         deadline_ms: f64,
     },
+    /// State frames arrive, but the controller's clock in them has not moved for this long:
+    /// they carry old data.
+    FrozenState {
+        for_ms: f64,
+        deadline_ms: f64,
+    },
+    /// The controller reports a collision (`collision_state`).
+    Collision,
+    /// The newest object pose is older than the deadline.
+    StalePose {
+        age_ms: f64,
+        deadline_ms: f64,
+    },
     /// The state stream failed (closed, reset, unreadable).
     StreamFailed(String),
     /// A call to the controller failed or timed out.
@@ -51,6 +64,9 @@ impl Fault {
     pub fn kind(&self) -> &'static str {
         match self {
             Self::StaleState { .. } => "stale_state",
+            Self::FrozenState { .. } => "frozen_state",
+            Self::Collision => "collision",
+            Self::StalePose { .. } => "stale_pose",
             Self::StreamFailed(_) => "stream_failed",
             Self::CallFailed { .. } => "call_failed",
             Self::ControllerFault { .. } => "controller_fault",
@@ -74,6 +90,27 @@ impl fmt::Display for Fault {
                 f,
                 "stale state: the controller's last state is {age_ms:.0} ms old (deadline \
                  {deadline_ms:.0} ms); check the network and the CNDE stream on port 20005"
+            ),
+            Self::FrozenState {
+                for_ms,
+                deadline_ms,
+            } => write!(
+                f,
+                "frozen state: frames arrive but the controller's clock (robot_time) in them has \
+                 not moved for {for_ms:.0} ms (deadline {deadline_ms:.0} ms): they carry old data"
+            ),
+            Self::Collision => write!(
+                f,
+                "collision: the controller detected a collision (collision_state 1); check the \
+                 cell, then clear it on the controller"
+            ),
+            Self::StalePose {
+                age_ms,
+                deadline_ms,
+            } => write!(
+                f,
+                "stale object pose: the newest is {age_ms:.0} ms old (deadline {deadline_ms:.0} \
+                 ms); check the perception (or the twin's pose feed)"
             ),
             Self::StreamFailed(m) => write!(f, "state stream failed: {m}"),
             Self::CallFailed { call, message } => write!(f, "call failed: {call}: {message}"),

@@ -158,10 +158,26 @@ impl SafetyFilter {
     /// The first part of the arm below the table's clearance or outside the cell's box at
     /// joint angles (deg), or `None` when the whole arm is clear.
     pub fn part_outside(&self, joints: &[f64; 6]) -> Option<PartOutside> {
-        let (floor, lo, hi) = (self.floor_z - EPS, self.cell_min, self.cell_max);
+        self.part_below(joints, self.floor_z)
+    }
+
+    /// [`Self::part_outside`] with the floor at `floor` (mm).
+    fn part_below(&self, joints: &[f64; 6], floor: f64) -> Option<PartOutside> {
+        let (lo, hi) = (self.cell_min, self.cell_max);
         self.arm.first_part_outside(joints, |c, r| {
-            c[2] - r >= floor && (0..3).all(|k| c[k] - r >= lo[k] - EPS && c[k] + r <= hi[k] + EPS)
+            c[2] - r >= floor - EPS
+                && (0..3).all(|k| c[k] - r >= lo[k] - EPS && c[k] + r <= hi[k] + EPS)
         })
+    }
+
+    /// The lowest point of the arm's parts at `joints` (deg), mm.
+    fn lowest_part(&self, joints: &[f64; 6]) -> f64 {
+        let mut low = f64::INFINITY;
+        self.arm.first_part_outside(joints, |c, r| {
+            low = low.min(c[2] - r);
+            true
+        });
+        low
     }
 
     /// Why the arm may not be at `joints` (deg): the TCP outside the workspace box or a part
@@ -262,8 +278,12 @@ impl SafetyFilter {
 
     /// Checks a point-to-point move (MoveJ: every joint in step along the straight joint-space
     /// line) from `from` to `to` (deg): every point of it inside the soft limits, the TCP in
-    /// the box and the whole arm clear. Points are checked so densely that nothing of the arm
-    /// moves more than [`PATH_STEP_MM`] between two of them.
+    /// the box and the whole arm clear of the table and inside the cell. Points are checked so
+    /// densely that nothing of the arm moves more than [`PATH_STEP_MM`] between two of them.
+    ///
+    /// `from` is a measured pose: the drives lag their set points, so an arm stopped just past
+    /// a soft limit, the box or the table's clearance may move home through limits grown to
+    /// include where it is (never the cell, never past what it already reaches).
     pub fn check_path(&self, from: &[f64; 6], to: &[f64; 6]) -> std::result::Result<(), Fault> {
         let turn: f64 = (0..6).map(|i| (to[i] - from[i]).abs()).sum();
         if !turn.is_finite() {
@@ -271,15 +291,23 @@ impl SafetyFilter {
                 "a move from {from:.1?} to {to:.1?} deg is not finite"
             )));
         }
+        let (lower, upper): ([f64; 6], [f64; 6]) = (
+            std::array::from_fn(|i| self.lower[i].min(from[i])),
+            std::array::from_fn(|i| self.upper[i].max(from[i])),
+        );
+        let tcp_from = self.arm.tcp_mm(from).unwrap_or(self.box_min);
+        let (box_min, box_max): ([f64; 3], [f64; 3]) = (
+            std::array::from_fn(|k| self.box_min[k].min(tcp_from[k])),
+            std::array::from_fn(|k| self.box_max[k].max(tcp_from[k])),
+        );
+        let floor = self.floor_z.min(self.lowest_part(from));
         let n = (turn.to_radians() * ARM_REACH_MM / PATH_STEP_MM)
             .ceil()
             .max(1.0) as usize;
         for k in 0..=n {
             let s = k as f64 / n as f64;
             let q: [f64; 6] = std::array::from_fn(|i| from[i] + (to[i] - from[i]) * s);
-            if let Some(i) =
-                (0..6).find(|&i| q[i] < self.lower[i] - EPS || q[i] > self.upper[i] + EPS)
-            {
+            if let Some(i) = (0..6).find(|&i| q[i] < lower[i] - EPS || q[i] > upper[i] + EPS) {
                 return Err(Fault::UnsafeStart(format!(
                     "the move to {to:.1?} deg takes joint {} to {:.2} deg, outside its soft \
                      limits [{:.2}, {:.2}] deg (with the margin)",
@@ -289,7 +317,19 @@ impl SafetyFilter {
                     self.upper[i]
                 )));
             }
-            if let Some(outside) = self.where_outside(&q) {
+            let tcp = self.arm.tcp_mm(&q);
+            let tcp_outside = !tcp.is_some_and(|p| {
+                (0..3).all(|k| p[k] >= box_min[k] - EPS && p[k] <= box_max[k] + EPS)
+            });
+            let outside = if tcp_outside {
+                Some(PartOutside {
+                    part: "TCP".into(),
+                    at_mm: tcp.unwrap_or([f64::NAN; 3]),
+                })
+            } else {
+                self.part_below(&q, floor)
+            };
+            if let Some(outside) = outside {
                 return Err(Fault::UnsafeStart(format!(
                     "the move to {to:.1?} deg would pass where {} ({:.0} % of the way); move \
                      the arm with the teach pendant or change the home pose",

@@ -168,6 +168,8 @@ pub struct Controller {
     fault: Option<Fault>,
     setpoint: Joints,
     setpoint_time: f64,
+    /// When the latest measurement was taken (s): the clock the state reports.
+    measured_at: f64,
     active: Option<ActiveMove>,
     queue: VecDeque<QueuedMove>,
     servo_session: bool,
@@ -220,6 +222,7 @@ impl Controller {
             fault: None,
             setpoint: home_deg,
             setpoint_time: now,
+            measured_at: now,
             active: None,
             queue: VecDeque::new(),
             servo_session: false,
@@ -622,6 +625,7 @@ impl Controller {
     pub fn observe(&mut self, now: f64, measured: Measured) {
         self.gripper.observe(now, measured.gripper_percent);
         self.measured = measured;
+        self.measured_at = now;
         let Some(active) = &self.active else {
             return;
         };
@@ -684,6 +688,8 @@ impl Controller {
             gripper_motion_done: self.gripper.done,
             gripper_active: self.gripper.active,
             gripper_fault: 0,
+            collision: false,
+            controller_clock_ms: Some((self.measured_at * 1000.0).round() as i64),
         }
     }
 

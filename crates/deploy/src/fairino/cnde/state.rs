@@ -13,11 +13,37 @@ use crate::robot::RobotState;
 enum FieldValue<'a> {
     Floats(&'a [f64]),
     Int(i64),
+    Ints(Vec<i64>),
     Zero,
 }
 
+/// `robot_time`'s seven values (year, month, day, hour, minute, second, millisecond) for a
+/// clock in ms since the start of the month; year and month are left 0.
+fn clock_fields(ms: i64) -> Vec<i64> {
+    let (day, rest) = (ms / 86_400_000, ms % 86_400_000);
+    vec![
+        0,
+        0,
+        day + 1,
+        rest / 3_600_000,
+        rest / 60_000 % 60,
+        rest / 1000 % 60,
+        rest % 1000,
+    ]
+}
+
+/// The clock in ms since the start of the month from `robot_time`'s values, or `None` when
+/// they are all zero (a controller that does not fill it).
+fn clock_ms(values: &[(f64, i64)]) -> Option<i64> {
+    let v: Vec<i64> = values.iter().map(|(_, i)| *i).collect();
+    if v.len() < 7 || v.iter().all(|&x| x == 0) {
+        return None;
+    }
+    Some((((v[2] - 1).max(0) * 24 + v[3]) * 60 + v[4]) * 60_000 + v[5] * 1000 + v[6])
+}
+
 fn value_of<'a>(name: &str, state: &'a RobotState, payload_len: usize) -> FieldValue<'a> {
-    use FieldValue::{Floats, Int, Zero};
+    use FieldValue::{Floats, Int, Ints, Zero};
     match name {
         "frame_head" => Int(0x5A5A),
         "data_len" => Int(payload_len as i64),
@@ -39,6 +65,11 @@ fn value_of<'a>(name: &str, state: &'a RobotState, payload_len: usize) -> FieldV
         "gripper_motion_done" => Int(state.gripper_motion_done.into()),
         "gripper_active" => Int(state.gripper_active.into()),
         "gripper_fault" => Int(state.gripper_fault.into()),
+        "collision_state" => Int(state.collision.into()),
+        "robot_time" => match state.controller_clock_ms {
+            Some(ms) => Ints(clock_fields(ms)),
+            None => Zero,
+        },
         _ => Zero,
     }
 }
@@ -63,6 +94,10 @@ fn write_field(out: &mut Vec<u8>, field: &StateField, value: FieldValue) {
                 (v, v as i64)
             }
             FieldValue::Int(v) if i == 0 => (*v as f64, *v),
+            FieldValue::Ints(v) => {
+                let x = v.get(i).copied().unwrap_or(0);
+                (x as f64, x)
+            }
             _ => (0.0, 0),
         };
         write_scalar(out, wire.scalar, float, int);
@@ -147,6 +182,8 @@ fn store(state: &mut RobotState, name: &str, values: &[(f64, i64)]) {
         "gripper_motion_done" => state.gripper_motion_done = int != 0,
         "gripper_active" => state.gripper_active = int != 0,
         "gripper_fault" => state.gripper_fault = int as i32,
+        "collision_state" => state.collision = int != 0,
+        "robot_time" => state.controller_clock_ms = clock_ms(values),
         _ => {}
     }
 }
@@ -198,6 +235,8 @@ mod tests {
             gripper_motion_done: false,
             gripper_active: false,
             gripper_fault: 5,
+            collision: true,
+            controller_clock_ms: Some(((2 * 24 + 13) * 3600 + 7 * 60 + 9) * 1000 + 250),
         }
     }
 
