@@ -142,11 +142,6 @@ impl SafetyFilter {
         (self.floor_z, self.cell_min, self.cell_max)
     }
 
-    /// The arm's forward kinematics the checks use.
-    pub fn kinematics(&self) -> &ArmKinematics {
-        &self.arm
-    }
-
     /// The TCP (mm) for joint angles (deg), when it lies inside the box.
     pub fn tcp_in_box(&self, joints: &[f64; 6]) -> Option<[f64; 3]> {
         let tcp = self.arm.tcp_mm(joints)?;
