@@ -99,9 +99,8 @@ impl Envelope {
         self.len() == 0
     }
 
-    /// Places every sphere at joint vector `q` (root frame) and calls `check` with the part's
-    /// name, the centre and the radius; stops at the first sphere `check` refuses and returns
-    /// its part and centre.
+    /// Places every sphere at joint vector `q` (root frame) and calls `check` with its centre
+    /// and radius; stops at the first sphere `check` refuses and returns its part and centre.
     pub fn first_outside(
         &self,
         q: &[f64],
