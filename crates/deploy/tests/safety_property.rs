@@ -1,7 +1,8 @@
 //! The safety filter against a million random policy outputs (NaN, ±inf and 1e30 among them)
 //! from random starting states of the FR5: no set point ever leaves the soft limits, the FR5's
 //! published limits, the speed and acceleration caps, the workspace box, or lets any part of
-//! the arm (link origins, flange, fingertips) near the table or out of the cell.
+//! the arm (link origins, flange, fingertips) near the table or out of the cell; and no MoveJ
+//! path it passes does either.
 //!
 //! The set points are judged with forward kinematics of this file's own, from the FR5's
 //! published joint chain and the gripper's drawing, not with the filter's.
@@ -170,6 +171,7 @@ fn a_million_random_outputs_never_leave_the_limits_caps_or_box() {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let (mut sent, mut faults, mut non_finite) = (0u64, 0u64, 0u64);
     let mut workspace_faults = 0u64;
+    let mut moves_passed = 0u64;
     let mut total = 0u64;
     while total < 1_000_000 {
         // A random episode: speed scale, margins and a starting state.
@@ -191,6 +193,15 @@ fn a_million_random_outputs_never_leave_the_limits_caps_or_box() {
         }
         if f.start(&start).is_err() {
             continue;
+        }
+        // One episode in twenty, a MoveJ from the start to a random pose: when the filter
+        // passes its path, every point of the path keeps the limits, the box and the clearance.
+        if rng.random_bool(0.05) {
+            let to: [f64; 6] = std::array::from_fn(|i| start[i] + rng.random_range(-40.0..40.0));
+            if f.check_path(&start, &to).is_ok() {
+                moves_passed += 1;
+                assert_move_j_path_clear(&f, &start, &to);
+            }
         }
         let (mut last, mut velocity) = (start, [0.0; 6]);
         for _ in 0..1000 {
@@ -276,7 +287,7 @@ fn a_million_random_outputs_never_leave_the_limits_caps_or_box() {
     }
     println!(
         "{total} outputs: {sent} set points, {faults} stops ({non_finite} non-finite, \
-         {workspace_faults} workspace)"
+         {workspace_faults} workspace); {moves_passed} MoveJ paths passed and held"
     );
     // The filter must not buy safety by refusing everything: most outputs become set points.
     assert!(
@@ -284,6 +295,45 @@ fn a_million_random_outputs_never_leave_the_limits_caps_or_box() {
         "only {sent} of {total} outputs were sent"
     );
     assert!(non_finite > 0);
+    assert!(moves_passed >= 10, "only {moves_passed} MoveJ paths passed");
+}
+
+/// Every point of the straight joint-space line from `from` to `to` (each joint in step, as
+/// MoveJ moves), sampled every 0.1 deg of the largest joint's turn, inside the soft limits,
+/// the TCP in its box and every point of the arm above the floor and in the cell — judged
+/// with this file's kinematics. The filter checks points no part moves 1 mm between; the
+/// floor here gives that millimetre.
+fn assert_move_j_path_clear(f: &SafetyFilter, from: &[f64; 6], to: &[f64; 6]) {
+    let (lower, upper) = f.joint_limits();
+    let (box_min, box_max) = f.workspace();
+    let (floor, cell_min, cell_max) = f.arm_bounds();
+    let widest = (0..6).map(|i| (to[i] - from[i]).abs()).fold(0.0, f64::max);
+    let n = (widest / 0.1).ceil().max(1.0) as usize;
+    for k in 0..=n {
+        let s = k as f64 / n as f64;
+        let q: [f64; 6] = std::array::from_fn(|i| from[i] + (to[i] - from[i]) * s);
+        for i in 0..6 {
+            assert!(
+                q[i] >= lower[i] - 1e-9 && q[i] <= upper[i] + 1e-9,
+                "joint {i}"
+            );
+        }
+        let tcp = f.tcp_in_box(&q);
+        assert!(tcp.is_some(), "TCP out of {box_min:?}–{box_max:?} at {q:?}");
+        for (name, p) in own_points(&q) {
+            assert!(
+                p[2] >= floor - 1.0,
+                "{name} at z {:.2} mm on the way to {to:?}",
+                p[2]
+            );
+            for k in 0..3 {
+                assert!(
+                    p[k] >= cell_min[k] - 1.0 && p[k] <= cell_max[k] + 1.0,
+                    "{name}"
+                );
+            }
+        }
+    }
 }
 
 #[test]
