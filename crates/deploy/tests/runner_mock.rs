@@ -10,7 +10,7 @@ use fairgrasp_deploy::{DeployError, Result};
 use fairgrasp_rl::policies::Policy;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -163,7 +163,19 @@ fn deployment_of(
     steps: u32,
     episodes: u32,
 ) -> (Deployment, Arc<AtomicBool>) {
-    let policy = Policy::load(&model_dir()).unwrap();
+    deployment_with(robot, &model_dir(), live, steps, episodes, 1.0)
+}
+
+/// The model in `model`, deployed on `robot` with identity calibration at `speed_scale`.
+fn deployment_with(
+    robot: &MockRobot,
+    model: &Path,
+    live: bool,
+    steps: u32,
+    episodes: u32,
+    speed_scale: f64,
+) -> (Deployment, Arc<AtomicBool>) {
+    let policy = Policy::load(model).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let calibration = Calibration::identity(&io.limits_rad);
     let interrupt = Arc::new(AtomicBool::new(false));
@@ -173,7 +185,7 @@ fn deployment_of(
         max_steps: Some(steps),
         end_at_success: false,
         safety: SafetyConfig {
-            speed_scale: 1.0,
+            speed_scale,
             ..SafetyConfig::default()
         },
         ..DeployOptions::default()
@@ -353,28 +365,7 @@ fn ctrl_c_stops_the_arm() {
 fn the_move_home_is_capped_by_the_speed_scale() {
     use fairgrasp_deploy::fairino::fr5;
     let robot = MockRobot::new(home(), Trouble::None, 0);
-    let policy = Policy::load(&model_dir()).unwrap();
-    let io = ModelIo::for_policy(&policy).unwrap();
-    let options = DeployOptions {
-        live: true,
-        episodes: 1,
-        max_steps: Some(2),
-        end_at_success: false,
-        safety: SafetyConfig {
-            speed_scale: 0.25,
-            ..SafetyConfig::default()
-        },
-        ..DeployOptions::default()
-    };
-    let mut d = Deployment::new(
-        Box::new(robot.clone()),
-        policy,
-        Calibration::identity(&io.limits_rad),
-        options,
-        JsonLog::create(None).unwrap(),
-        Arc::new(AtomicBool::new(false)),
-    )
-    .unwrap();
+    let (mut d, _) = deployment_with(&robot, &model_dir(), true, 2, 1, 0.25);
     d.run(&mut Counting(0), &mut cube()).unwrap();
     let (speed, acc) = robot
         .calls()
@@ -438,33 +429,11 @@ fn a_move_home_through_the_table_is_never_sent() {
 /// ServoMoveEnd: the session never ends with the set points moving.
 #[test]
 fn the_servo_session_ends_with_the_arm_at_rest() {
-    const STEPS: u32 = 4;
     let policy = Policy::load(&deploy_model_dir()).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
-    let calibration = Calibration::identity(&io.limits_rad);
-    let robot = MockRobot::new(calibration.to_robot(&io.nominal.q), Trouble::None, 0);
-    let options = DeployOptions {
-        live: true,
-        episodes: 1,
-        max_steps: Some(STEPS),
-        end_at_success: false,
-        safety: SafetyConfig {
-            speed_scale: 0.25,
-            ..SafetyConfig::default()
-        },
-        ..DeployOptions::default()
-    };
-    let log = JsonLog::create(None).unwrap();
-    let stop = Arc::new(AtomicBool::new(false));
-    let mut d = Deployment::new(
-        Box::new(robot.clone()),
-        policy,
-        calibration,
-        options,
-        log,
-        stop,
-    )
-    .unwrap();
+    let home = Calibration::identity(&io.limits_rad).to_robot(&io.nominal.q);
+    let robot = MockRobot::new(home, Trouble::None, 0);
+    let (mut d, _) = deployment_with(&robot, &deploy_model_dir(), true, 4, 1, 0.25);
     let period = d.servo_period().as_secs_f64();
     let report = d.run(&mut Counting(0), &mut cube()).unwrap();
     assert!(report.fault.is_none(), "{:?}", report.fault);
