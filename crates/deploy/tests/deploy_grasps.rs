@@ -11,10 +11,9 @@
 use fairgrasp_deploy::calibration::Calibration;
 mod common;
 
-use common::{twin_client, twin_client_with};
+use common::{shared_host_safety, twin_client, twin_client_with};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
-use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::{Twin, TwinConfig};
 use fairgrasp_rl::policies::Policy;
@@ -90,14 +89,7 @@ fn grasps_on_the_twin(model: &str, servo: Servo) {
     let options = DeployOptions {
         live: true,
         episodes: 3,
-        safety: SafetyConfig {
-            speed_scale: 0.5,
-            // This test is about grasping through the real protocol, not the watchdog (the fault
-            // tests cover stale state): on the shared 2-core host the twin's 8 ms stream once
-            // arrived 76 ms late while nothing else of ours ran, past the 50 ms default.
-            state_deadline_ms: 250.0,
-            ..SafetyConfig::default()
-        },
+        safety: shared_host_safety(0.5),
         ..DeployOptions::default()
     };
     let mut deployment = Deployment::new(

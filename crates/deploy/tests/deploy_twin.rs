@@ -5,7 +5,7 @@
 use fairgrasp_deploy::calibration::Calibration;
 mod common;
 
-use common::twin_client;
+use common::{shared_host_safety, twin_client};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunReport, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
@@ -31,10 +31,7 @@ fn run_with(fault: Option<(&str, &str)>, after: usize, episodes: u32) -> (RunRep
         live: true,
         episodes,
         max_steps: Some(60),
-        safety: SafetyConfig {
-            speed_scale: 1.0,
-            ..SafetyConfig::default()
-        },
+        safety: shared_host_safety(1.0),
         ..DeployOptions::default()
     };
     let mut deployment = Deployment::new(

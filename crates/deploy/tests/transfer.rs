@@ -13,7 +13,7 @@
 use fairgrasp_deploy::calibration::Calibration;
 mod common;
 
-use common::twin_client;
+use common::{shared_host_safety, twin_client};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::robot::RobotLink;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
@@ -59,15 +59,17 @@ fn train_deployment_policy(dir: &Path) {
     );
 }
 
-fn deployment(link: Box<dyn RobotLink>, policy: Policy, episodes: u32) -> Deployment {
+fn deployment(
+    link: Box<dyn RobotLink>,
+    policy: Policy,
+    episodes: u32,
+    safety: SafetyConfig,
+) -> Deployment {
     let io = ModelIo::for_policy(&policy).unwrap();
     let options = DeployOptions {
         live: true,
         episodes,
-        safety: SafetyConfig {
-            speed_scale: 1.0,
-            ..SafetyConfig::default()
-        },
+        safety,
         ..DeployOptions::default()
     };
     Deployment::new(
@@ -91,7 +93,11 @@ fn deployment_matched(model: &Path, episodes: u32) -> u32 {
         ..SimulatedSettings::default()
     };
     let link = SimulatedController::new(policy.env_id(), &table, settings).unwrap();
-    let mut deployment = deployment(Box::new(link.clone()), policy, episodes);
+    let safety = SafetyConfig {
+        speed_scale: 1.0,
+        ..SafetyConfig::default()
+    };
+    let mut deployment = deployment(Box::new(link.clone()), policy, episodes, safety);
     let report = deployment
         .run(&mut link.host(), &mut link.pose_source())
         .unwrap();
@@ -116,7 +122,8 @@ fn on_the_twin(model: &Path, episodes: u32) -> u32 {
     })
     .unwrap();
     let client = twin_client(&twin);
-    let mut deployment = deployment(Box::new(client), Policy::load(model).unwrap(), episodes);
+    let policy = Policy::load(model).unwrap();
+    let mut deployment = deployment(Box::new(client), policy, episodes, shared_host_safety(1.0));
     let mut host = TwinHost::detect(&twin.rpc_addr().to_string(), 1)
         .unwrap()
         .expect("the twin says it is one");
