@@ -203,7 +203,7 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         calibration,
         options.clone(),
         log,
-        interrupt,
+        interrupt.clone(),
     )?;
     for why in deployment.mismatches() {
         eprintln!("warning: {why}");
@@ -221,7 +221,7 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         options.safety.speed_scale,
         args.log.display()
     );
-    let mut operator = OperatorHost::stdin();
+    let mut operator = OperatorHost::stdin(interrupt.clone());
     let mut twin_host = twin;
     let host: &mut dyn EpisodeHost = match &mut twin_host {
         Some(t) => t,

@@ -5,6 +5,7 @@
 
 use crate::Result;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// One state report of the controller (a CNDE frame, decoded).
@@ -173,4 +174,17 @@ pub trait RobotLink: Send {
             std::thread::sleep(t - now);
         }
     }
+
+    /// A second line to the same controller, usable from another thread while this link's own
+    /// call blocks: how a StopMotion reaches the arm during a MoveJ, and how a gripper command
+    /// goes out without holding back the servo set points. `None` where calls never block
+    /// (a simulated controller, test stubs).
+    fn side_line(&self) -> Option<Arc<dyn SideLine>> {
+        None
+    }
+}
+
+/// See [`RobotLink::side_line`]. Each call has the link's timeout.
+pub trait SideLine: Send + Sync {
+    fn send(&self, command: &RobotCommand) -> Result<()>;
 }

@@ -7,9 +7,9 @@ use super::cnde::{CndeClient, DEFAULT_PERIOD_MS, default_state_names};
 use super::error_codes::error_code_meaning;
 use super::udp::{self, ServoSender};
 use super::xmlrpc::{Value, XmlRpcClient};
-use crate::robot::{RobotCommand, RobotLink, StampedState};
+use crate::robot::{RobotCommand, RobotLink, SideLine, StampedState};
 use crate::{DeployError, Result};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// Ports and timeouts of a [`FairinoClient`].
@@ -50,11 +50,13 @@ impl Default for ClientConfig {
     }
 }
 
-/// A connected controller.
+/// A connected controller. Clones share the connection (the stream, the servo socket) and
+/// may call from other threads.
+#[derive(Clone)]
 pub struct FairinoClient {
     rpc: XmlRpcClient,
-    cnde: CndeClient,
-    servo_udp: Option<Mutex<ServoSender>>,
+    cnde: Arc<CndeClient>,
+    servo_udp: Option<Arc<Mutex<ServoSender>>>,
     config: ClientConfig,
 }
 
@@ -82,15 +84,15 @@ impl FairinoClient {
         let rpc = XmlRpcClient::new(&host_port(ip, config.rpc_port), config.call_timeout);
         rpc.call_with_timeout("GetControllerIP", &[], config.connect_timeout)?;
         let servo_udp = match config.servo_udp_port {
-            Some(port) => Some(Mutex::new(ServoSender::connect(
+            Some(port) => Some(Arc::new(Mutex::new(ServoSender::connect(
                 &host_port(ip, port),
                 config.call_timeout,
-            )?)),
+            )?))),
             None => None,
         };
         Ok(FairinoClient {
             rpc,
-            cnde,
+            cnde: Arc::new(cnde),
             servo_udp,
             config: config.clone(),
         })
@@ -320,6 +322,16 @@ impl RobotLink for FairinoClient {
     }
 
     fn send(&mut self, command: &RobotCommand) -> Result<()> {
+        self.send_command(command)
+    }
+
+    fn side_line(&self) -> Option<Arc<dyn SideLine>> {
+        Some(Arc::new(self.clone()))
+    }
+}
+
+impl SideLine for FairinoClient {
+    fn send(&self, command: &RobotCommand) -> Result<()> {
         self.send_command(command)
     }
 }

@@ -3,13 +3,22 @@
 //! StopMotion and ServoMoveEnd and refuses every further command.
 
 use super::log::JsonLog;
-use crate::robot::{RobotCommand, RobotLink, StampedState};
+use crate::robot::{RobotCommand, RobotLink, SideLine, StampedState};
 use crate::safety::Fault;
+use std::sync::Arc;
+use std::thread::JoinHandle;
 use std::time::Instant;
+
+/// A command under way on the side line.
+type Aside = (RobotCommand, JoinHandle<Result<(), String>>);
 
 pub struct GuardedLink {
     link: Box<dyn RobotLink>,
     live: bool,
+    /// The link's second line, live only.
+    side: Option<Arc<dyn SideLine>>,
+    /// The one command sent aside and not yet answered.
+    aside: Option<Aside>,
     /// The fault that stopped the arm, once one has.
     tripped: Option<Fault>,
     last_sequence: u64,
@@ -21,9 +30,12 @@ pub struct GuardedLink {
 impl GuardedLink {
     /// `live = false`: a dry run that reads the robot but only prints what it would send.
     pub fn new(link: Box<dyn RobotLink>, live: bool, log: JsonLog) -> Self {
+        let side = if live { link.side_line() } else { None };
         Self {
             link,
             live,
+            side,
+            aside: None,
             tripped: None,
             last_sequence: u64::MAX,
             stopped_in: None,
@@ -59,6 +71,46 @@ impl GuardedLink {
         }
         let result = self.link.send(command).map_err(|e| e.to_string());
         self.log.sent(command, result.clone());
+        result.map_err(|message| Fault::CallFailed {
+            call: command.method().into(),
+            message,
+        })
+    }
+
+    /// The link's second line (live only): for a watcher on another thread.
+    pub fn side_line(&self) -> Option<Arc<dyn SideLine>> {
+        self.side.clone()
+    }
+
+    /// Sends a command without waiting for its reply, over the side line, so the servo set
+    /// points keep flowing meanwhile: one at a time (an earlier one is waited for first).
+    /// Without a side line (a dry run, a simulated controller) it is [`Self::send`].
+    pub fn send_aside(&mut self, command: &RobotCommand) -> Result<(), Fault> {
+        self.settle_aside(true)?;
+        let Some(side) = self.side.clone() else {
+            return self.send(command);
+        };
+        if self.tripped.is_some() {
+            return self.send(command);
+        }
+        let sent = command.clone();
+        let call = std::thread::spawn(move || side.send(&sent).map_err(|e| e.to_string()));
+        self.aside = Some((command.clone(), call));
+        Ok(())
+    }
+
+    /// Takes the reply of the command sent aside, if it has come (or, with `wait`, once it
+    /// comes): its failure is the loop's fault.
+    pub fn settle_aside(&mut self, wait: bool) -> Result<(), Fault> {
+        match &self.aside {
+            Some((_, call)) if wait || call.is_finished() => {}
+            _ => return Ok(()),
+        }
+        let (command, call) = self.aside.take().expect("matched above");
+        let result = call
+            .join()
+            .unwrap_or_else(|_| Err("the call's thread panicked".into()));
+        self.log.sent(&command, result.clone());
         result.map_err(|message| Fault::CallFailed {
             call: command.method().into(),
             message,

@@ -5,6 +5,9 @@ use super::EpisodeHost;
 use crate::error::{DeployError, Result};
 use crate::fairino::xmlrpc::{Value, XmlRpcClient};
 use std::io::BufRead;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::Duration;
 
 /// The digital twin: `TwinReset(seed)` places a new object before each episode and
@@ -64,21 +67,38 @@ impl EpisodeHost for TwinHost {
 ///
 /// Only a line counts as Enter: at the end of the input (stdin closed, or deploy run under a
 /// pipe or nohup with nothing to read) the episode is refused, so an arm never starts moving
-/// without a person having confirmed that the cell is clear.
+/// without a person having confirmed that the cell is clear. Ctrl-C ends the wait at once:
+/// the input is read on its own thread, since a read from a terminal cannot be interrupted.
 pub struct OperatorHost {
-    input: Box<dyn BufRead>,
+    lines: Receiver<std::io::Result<usize>>,
+    interrupt: Arc<AtomicBool>,
 }
+
+/// How often the prompt looks at the interrupt flag.
+const PROMPT_POLL: Duration = Duration::from_millis(5);
 
 impl OperatorHost {
     /// The operator at this terminal.
-    pub fn stdin() -> Self {
-        Self::new(std::io::BufReader::new(std::io::stdin()))
+    pub fn stdin(interrupt: Arc<AtomicBool>) -> Self {
+        Self::new(std::io::BufReader::new(std::io::stdin()), interrupt)
     }
 
     /// An operator whose confirmations are the lines of `input`.
-    pub fn new(input: impl BufRead + 'static) -> Self {
+    pub fn new(mut input: impl BufRead + Send + 'static, interrupt: Arc<AtomicBool>) -> Self {
+        let (lines, received) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            loop {
+                let mut line = String::new();
+                let read = input.read_line(&mut line);
+                let last = !matches!(read, Ok(n) if n > 0);
+                if lines.send(read).is_err() || last {
+                    return;
+                }
+            }
+        });
         Self {
-            input: Box::new(input),
+            lines: received,
+            interrupt,
         }
     }
 }
@@ -90,15 +110,28 @@ impl EpisodeHost for OperatorHost {
              Enter (Ctrl-C aborts)",
             index + 1
         );
-        let mut line = String::new();
-        if self.input.read_line(&mut line)? == 0 {
-            return Err(DeployError::Other(format!(
+        let ended = || {
+            DeployError::Other(format!(
                 "episode {}: the input ended before the operator pressed Enter; end of input \
                  never confirms an episode (run deploy from a terminal)",
                 index + 1
-            )));
+            ))
+        };
+        loop {
+            match self.lines.recv_timeout(PROMPT_POLL) {
+                Ok(Ok(0)) | Err(RecvTimeoutError::Disconnected) => return Err(ended()),
+                Ok(Ok(_)) => return Ok(()),
+                Ok(Err(e)) => return Err(e.into()),
+                Err(RecvTimeoutError::Timeout) => {
+                    if self.interrupt.load(Ordering::Relaxed) {
+                        return Err(DeployError::Other(format!(
+                            "episode {}: interrupted at the operator's prompt",
+                            index + 1
+                        )));
+                    }
+                }
+            }
         }
-        Ok(())
     }
 
     fn outcome(&mut self) -> Result<Option<bool>> {
@@ -109,10 +142,15 @@ impl EpisodeHost for OperatorHost {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Instant;
+
+    fn no_interrupt() -> Arc<AtomicBool> {
+        Arc::new(AtomicBool::new(false))
+    }
 
     #[test]
     fn only_a_line_confirms_an_episode_and_the_end_of_input_refuses() {
-        let mut host = OperatorHost::new(&b"\nready\n"[..]);
+        let mut host = OperatorHost::new(&b"\nready\n"[..], no_interrupt());
         host.begin(0).unwrap();
         host.begin(1).unwrap();
         let err = host.begin(2).unwrap_err().to_string();
@@ -120,10 +158,46 @@ mod tests {
             err.contains("episode 3") && err.contains("end of input never confirms"),
             "{err}"
         );
-        let err = OperatorHost::new(&b""[..])
+        let err = OperatorHost::new(&b""[..], no_interrupt())
             .begin(0)
             .unwrap_err()
             .to_string();
         assert!(err.contains("episode 1"), "{err}");
+    }
+
+    /// An input that never sends a line, like a terminal nobody types at.
+    struct Silent;
+
+    impl std::io::Read for Silent {
+        fn read(&mut self, _: &mut [u8]) -> std::io::Result<usize> {
+            std::thread::sleep(Duration::from_secs(3600));
+            Ok(0)
+        }
+    }
+
+    #[test]
+    fn ctrl_c_ends_the_prompt_without_a_line() {
+        let interrupt = no_interrupt();
+        let mut host = OperatorHost::new(std::io::BufReader::new(Silent), interrupt.clone());
+        let raise = {
+            let interrupt = interrupt.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(50));
+                interrupt.store(true, Ordering::Relaxed);
+                Instant::now()
+            })
+        };
+        let err = host.begin(0).unwrap_err().to_string();
+        let raised = raise.join().unwrap();
+        assert!(
+            err.contains("interrupted at the operator's prompt"),
+            "{err}"
+        );
+        // The prompt looks at the flag every 5 ms; a loaded host may add to it, not 10x.
+        assert!(
+            raised.elapsed() < Duration::from_millis(50),
+            "{:?}",
+            raised.elapsed()
+        );
     }
 }

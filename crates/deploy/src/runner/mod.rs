@@ -16,6 +16,7 @@ mod clock;
 mod estimate;
 mod guard;
 mod hosts;
+pub mod interrupt;
 mod log;
 mod model_io;
 
@@ -216,47 +217,34 @@ impl Deployment {
     }
 
     /// Runs every episode; a fault stops the arm and ends the run (see [`RunReport::fault`]).
+    /// Live, Ctrl-C sends StopMotion at once over a second line whatever the loop waits on
+    /// ([`interrupt`]).
     pub fn run(
         &mut self,
         host: &mut dyn EpisodeHost,
         pose: &mut dyn PoseSource,
     ) -> Result<RunReport> {
-        let mut episodes = Vec::new();
-        let fault = match self.prepare() {
-            Err(fault) => Some(fault),
-            Ok(()) => loop {
-                if episodes.len() as u32 == self.options.episodes {
-                    break None;
-                }
-                let index = episodes.len() as u32;
-                host.begin(index)?;
-                match self.episode(index, pose) {
-                    Ok(mut report) => {
-                        report.success = host.outcome()?;
-                        let verdict = match report.success {
-                            Some(true) => "grasped",
-                            Some(false) => "failed",
-                            None => "done",
-                        };
-                        let ended = if report.ended_at_success {
-                            " (success rule held: ended)"
-                        } else {
-                            ""
-                        };
-                        println!(
-                            "episode {}: {verdict} after {} steps{ended}",
-                            index + 1,
-                            report.steps
-                        );
-                        self.link
-                            .log
-                            .note("episode", serde_json::json!(format!("{report:?}")));
-                        episodes.push(report);
-                    }
-                    Err(fault) => break Some(fault),
-                }
-            },
-        };
+        let line = self.link.side_line();
+        let interrupt = self.interrupt.clone();
+        let done = AtomicBool::new(false);
+        let (outcome, watched) = std::thread::scope(|s| {
+            let watcher = line
+                .as_deref()
+                .map(|line| s.spawn(|| interrupt::watch(&interrupt, &done, line)));
+            let outcome = self.episodes(host, pose);
+            done.store(true, Ordering::Relaxed);
+            (outcome, watcher.and_then(|w| w.join().ok().flatten()))
+        });
+        if let Some(w) = watched {
+            self.link.log.note(
+                "interrupt_stop",
+                serde_json::json!({
+                    "ms": w.took.as_secs_f64() * 1000.0,
+                    "error": w.result.err(),
+                }),
+            );
+        }
+        let (episodes, fault) = outcome?;
         let fault = fault.map(|f| {
             self.link.stop(&f);
             self.root_cause(f)
@@ -269,12 +257,63 @@ impl Deployment {
         })
     }
 
+    /// The episodes, until the last or a fault.
+    fn episodes(
+        &mut self,
+        host: &mut dyn EpisodeHost,
+        pose: &mut dyn PoseSource,
+    ) -> Result<(Vec<EpisodeReport>, Option<Fault>)> {
+        let mut episodes = Vec::new();
+        if let Err(fault) = self.prepare() {
+            return Ok((episodes, Some(fault)));
+        }
+        while (episodes.len() as u32) < self.options.episodes {
+            let index = episodes.len() as u32;
+            if let Err(e) = host.begin(index) {
+                if self.interrupt.load(Ordering::Relaxed) {
+                    return Ok((episodes, Some(Fault::Interrupted)));
+                }
+                return Err(e);
+            }
+            match self.episode(index, pose) {
+                Ok(mut report) => {
+                    report.success = host.outcome()?;
+                    let verdict = match report.success {
+                        Some(true) => "grasped",
+                        Some(false) => "failed",
+                        None => "done",
+                    };
+                    let ended = if report.ended_at_success {
+                        " (success rule held: ended)"
+                    } else {
+                        ""
+                    };
+                    println!(
+                        "episode {}: {verdict} after {} steps{ended}",
+                        index + 1,
+                        report.steps
+                    );
+                    self.link
+                        .log
+                        .note("episode", serde_json::json!(format!("{report:?}")));
+                    episodes.push(report);
+                }
+                Err(fault) => return Ok((episodes, Some(fault))),
+            }
+        }
+        Ok((episodes, self.link.settle_aside(true).err()))
+    }
+
     /// A refused call is often the echo of a state the stream had not shown yet (an e-stop, a
-    /// safety stop, a fault code) or of the stream's own failure: once the arm is stopped, look at the stream for up to 50 ms
-    /// and name that state instead.
+    /// safety stop, a fault code) or of the stream's own failure: once the arm is stopped,
+    /// look at the stream for up to 50 ms and name that state instead.
     fn root_cause(&mut self, fault: Fault) -> Fault {
         if !matches!(fault, Fault::CallFailed { .. }) {
             return fault;
+        }
+        // The call the StopMotion of Ctrl-C aborted (a MoveJ answers 14).
+        if self.interrupt.load(Ordering::Relaxed) {
+            return Fault::Interrupted;
         }
         let until = self.link.now() + Duration::from_millis(50);
         while self.link.now() < until {
@@ -325,8 +364,10 @@ impl Deployment {
         Ok(s)
     }
 
+    /// Commands the gripper without waiting for the reply, so the servo set points keep
+    /// flowing (a reply takes the controller's latency, more than a servo period).
     fn gripper(&mut self, open: bool) -> std::result::Result<(), Fault> {
-        self.link.send(&RobotCommand::MoveGripper {
+        self.link.send_aside(&RobotCommand::MoveGripper {
             index: self.options.gripper_index,
             position_percent: if open { 100 } else { 0 },
             // The speed scale slows the gripper as it slows the arm: at 0.25 with the gripper
@@ -371,6 +412,7 @@ impl Deployment {
                 self.checked_state()?;
             }
             first = false;
+            self.link.settle_aside(false)?;
             let n = clock.take_due(self.link.now(), until);
             let mut set_point = self.filter.next(target)?;
             for _ in 1..n {
@@ -390,6 +432,7 @@ impl Deployment {
         while let Some(mut set_point) = self.filter.brake() {
             self.link.sleep_until(clock.next_due());
             self.checked_state()?;
+            self.link.settle_aside(false)?;
             let n = clock.take_due(self.link.now(), u64::MAX);
             for _ in 1..n {
                 match self.filter.brake() {
@@ -506,6 +549,7 @@ impl Deployment {
             self.stream(&mut clock, &target, until)?;
         }
         self.come_to_rest(&mut clock)?;
+        self.link.settle_aside(true)?;
         self.link.send(&RobotCommand::ServoMoveEnd)?;
         self.gripper(true)?;
         Ok(EpisodeReport {
