@@ -103,7 +103,8 @@ pub struct DeployArgs {
     /// The gripper's index on the controller.
     #[arg(long, default_value_t = 1)]
     pub gripper_index: u8,
-    /// Every command sent and state received, as JSON lines.
+    /// Every command sent and state received, as JSON lines. An existing file is kept: the
+    /// log then goes to the first free NAME.2.jsonl, NAME.3.jsonl, … beside it.
     #[arg(long, default_value = "deploy_log.jsonl")]
     pub log: PathBuf,
     /// First episode seed for the twin's object placement (held-out by default).
@@ -202,14 +203,14 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         policy,
         calibration,
         options.clone(),
-        log,
+        log.clone(),
         interrupt.clone(),
     )?;
     for why in deployment.mismatches() {
         eprintln!("warning: {why}");
     }
     println!(
-        "{} on {} ({}): {} episode(s), speed scale {}, log {}",
+        "{} on {} ({}): {} episode(s), speed scale {}",
         if args.live { "LIVE" } else { "dry run" },
         args.robot.robot,
         if twin.is_some() {
@@ -219,15 +220,22 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         },
         args.episodes,
         options.safety.speed_scale,
-        args.log.display()
     );
-    let mut operator = OperatorHost::stdin(interrupt.clone());
+    if let Some(path) = log.path() {
+        println!("log: {}", path.display());
+    }
+    let mut operator = OperatorHost::stdin(interrupt);
     let mut twin_host = twin;
     let host: &mut dyn EpisodeHost = match &mut twin_host {
         Some(t) => t,
         None => &mut operator,
     };
-    let report = deployment.run(host, pose.as_mut())?;
+    let report = deployment.run(host, pose.as_mut());
+    log.flush();
+    if let Some(problem) = log.health() {
+        eprintln!("log: {problem}");
+    }
+    let report = report?;
     let judged: Vec<bool> = report.episodes.iter().filter_map(|e| e.success).collect();
     if !judged.is_empty() {
         println!(

@@ -650,3 +650,157 @@ fn a_live_deploy_refuses_a_fixed_object_pose_unless_told_the_object_is_static() 
         "{stderr}"
     );
 }
+
+#[test]
+fn a_deploy_killed_with_sigkill_while_the_controller_hangs_leaves_its_log_complete() {
+    use fairgrasp_deploy::twin::{Twin, TwinConfig};
+    use std::time::{Duration, Instant};
+    let twin = Twin::spawn(TwinConfig::ephemeral()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // Deadlines a shared host cannot race: the run must still be going when it is killed.
+    let safety = dir.path().join("safety.toml");
+    std::fs::write(
+        &safety,
+        "[safety]\nstate_deadline_ms = 500.0\npose_deadline_ms = 1000.0\n",
+    )
+    .unwrap();
+    // An earlier run's log stays as it was; this one goes beside it.
+    let earlier = dir.path().join("run.jsonl");
+    std::fs::write(&earlier, "{\"t\":0.0,\"earlier\":true}\n").unwrap();
+    let log = dir.path().join("run.2.jsonl");
+    let model = repo().join("crates/rl/tests/data/format1/ppo");
+    let (rpc, cnde) = (twin.rpc_addr().port(), twin.cnde_addr().port());
+    let pose = twin.pose_addr().unwrap().to_string();
+    let (stdout, stderr) = (dir.path().join("stdout"), dir.path().join("stderr"));
+    let child = Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
+        .args([
+            "deploy",
+            "--robot",
+            "127.0.0.1",
+            "--rpc-port",
+            &rpc.to_string(),
+        ])
+        .args(["--cnde-port", &cnde.to_string(), "--pose-tcp", &pose])
+        .args([
+            "--model",
+            model.to_str().unwrap(),
+            "--live",
+            "--episodes",
+            "50",
+        ])
+        .args(["--log", earlier.to_str().unwrap()])
+        .args(["--safety", safety.to_str().unwrap()])
+        // A late reply must hold the loop, as a hung controller would, not fault it.
+        .args(["--call-timeout-ms", "30000"])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::fs::File::create(&stdout).unwrap())
+        .stderr(std::fs::File::create(&stderr).unwrap())
+        .spawn()
+        .unwrap();
+    let mut child = KillOnDrop(Some(child));
+    let output = || {
+        let read = |p: &Path| std::fs::read_to_string(p).unwrap_or_default();
+        format!("stdout:\n{}\nstderr:\n{}", read(&stdout), read(&stderr))
+    };
+    let servo_calls = || {
+        let calls = twin.calls();
+        calls.iter().filter(|c| c.method == "ServoJ").count()
+    };
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut wait = |what: &str, done: &mut dyn FnMut() -> bool| {
+        while !done() {
+            assert!(child.running(), "exited; {}", output());
+            assert!(Instant::now() < deadline, "{what}; {}", output());
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        Instant::now()
+    };
+    // The log's clock starts as its file is created.
+    let created = wait("no log", &mut || log.exists());
+    wait("the log never reached 1.5 s of servoing", &mut || {
+        last_t(&complete_json_lines(&log)).is_some_and(|t| t >= 1.5) && servo_calls() > 0
+    });
+    // The controller takes 20 s to answer the next ServoJ: the loop waits for it, logging
+    // nothing more, and is killed there. Everything it logged before must be in the file.
+    twin.inject_text("slow", "ServoJ:20000:1").unwrap();
+    let held = wait("the slow ServoJ never came", &mut || {
+        twin.faults().slow.is_none()
+    });
+    let answered = servo_calls();
+    std::thread::sleep(Duration::from_millis(200));
+    child.kill();
+    assert_eq!(
+        std::fs::read_to_string(&earlier).unwrap(),
+        "{\"t\":0.0,\"earlier\":true}\n"
+    );
+    assert!(
+        output().contains(&format!("log: {}", log.display())),
+        "{}",
+        output()
+    );
+
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        text.ends_with('\n'),
+        "a line cut short: {:?}",
+        &text[text.len().saturating_sub(200)..]
+    );
+    let lines = complete_json_lines(&log);
+    let logged = lines
+        .iter()
+        .filter(|l| l["sent"]["call"] == "ServoJ")
+        .count();
+    assert_eq!(
+        logged, answered,
+        "ServoJ calls logged / answered by the twin"
+    );
+    // The loop ran until the slow ServoJ reached the twin, seen here at `held`: its last
+    // event came one servo period before that, give or take a loaded host.
+    let last = last_t(&lines).unwrap();
+    let held_at = held.duration_since(created).as_secs_f64();
+    assert!(
+        last >= held_at - 1.0,
+        "the log ends at t = {last:.3} s, the loop was held from t >= {held_at:.3} s"
+    );
+}
+
+/// The complete lines of a JSON-lines file (a line cut by a kill is left out), parsed.
+fn complete_json_lines(path: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let complete = &text[..text.rfind('\n').map_or(0, |i| i + 1)];
+    complete
+        .lines()
+        .map(|line| {
+            serde_json::from_str(line).unwrap_or_else(|e| panic!("{e} in log line {line:?}"))
+        })
+        .collect()
+}
+
+/// The `t` of a log's last line.
+fn last_t(lines: &[serde_json::Value]) -> Option<f64> {
+    lines.last().and_then(|l| l["t"].as_f64())
+}
+
+/// A child process killed (SIGKILL) when dropped, so a failing test leaves none behind.
+struct KillOnDrop(Option<std::process::Child>);
+
+impl KillOnDrop {
+    fn running(&mut self) -> bool {
+        self.0
+            .as_mut()
+            .is_some_and(|c| c.try_wait().unwrap().is_none())
+    }
+
+    fn kill(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
