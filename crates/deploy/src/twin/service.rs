@@ -394,9 +394,14 @@ impl TwinService {
         if method.starts_with("Twin") {
             return (0.0, 0.0);
         }
-        let mut faults = self.shared.faults.lock().expect("faults lock");
-        let half = faults.latency_ms / 2000.0;
-        let slow = faults.take_slow_delay(method) / 1000.0;
+        let half = self.shared.draw_latency() / 2.0;
+        let slow = self
+            .shared
+            .faults
+            .lock()
+            .expect("faults lock")
+            .take_slow_delay(method)
+            / 1000.0;
         (half, half + slow)
     }
 }
