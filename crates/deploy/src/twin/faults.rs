@@ -509,6 +509,117 @@ mod tests {
     }
 
     #[test]
+    fn parses_the_strict_controller_settings() {
+        let pair = |d, t| JointTracking {
+            delay_ms: d,
+            tau_ms: t,
+        };
+        assert_eq!(
+            FaultCommand::parse("tracking", "8,15").unwrap(),
+            FaultCommand::Tracking([pair(8.0, 15.0); 6])
+        );
+        let six = FaultCommand::parse("tracking", "1,2,3,4,5,6,7,8,9,10,11,12").unwrap();
+        let FaultCommand::Tracking(m) = six else {
+            panic!("{six:?}")
+        };
+        assert_eq!((m[0], m[5]), (pair(1.0, 2.0), pair(11.0, 12.0)));
+        assert_eq!(
+            FaultCommand::parse("tracking", "off").unwrap(),
+            FaultCommand::Tracking(TrackingModel::default())
+        );
+        assert_eq!(
+            FaultCommand::parse_assignment("latency_outliers=0.01,40").unwrap(),
+            FaultCommand::LatencyOutliers(Some(Occasional {
+                probability: 0.01,
+                ms: 40.0
+            }))
+        );
+        assert_eq!(
+            FaultCommand::parse("following_error_deg", "off").unwrap(),
+            FaultCommand::FollowingErrorDeg(None)
+        );
+        assert_eq!(
+            FaultCommand::parse("drop_frames", "0.1").unwrap(),
+            FaultCommand::DropFrames(0.1)
+        );
+        for (name, value) in [
+            ("tracking", "1,2,3"),
+            ("tracking", "-1,2"),
+            ("drop_frames", "1.5"),
+            ("late_frames", "0.5"),
+            ("latency_outliers", "2,10"),
+            ("following_error_deg", "0"),
+            ("brake_decel_deg_s2", "0"),
+            ("servoj_speed_tolerance", "x"),
+        ] {
+            let e = FaultCommand::parse(name, value).unwrap_err();
+            assert!(e.contains(name), "{e}");
+        }
+        for fault in strict() {
+            let text = fault.to_string();
+            assert!(!text.is_empty());
+        }
+    }
+
+    /// Jitter, outliers, dropped and late frames: the same seed draws the same sequence, and
+    /// the shares and spread are the ones asked for.
+    #[test]
+    fn jitter_outliers_and_frame_fates_are_drawn_reproducibly_from_the_seed() {
+        use rand::SeedableRng;
+        let settings = FaultSettings {
+            latency_ms: 10.0,
+            latency_jitter_ms: 4.0,
+            latency_outliers: Some(Occasional {
+                probability: 0.02,
+                ms: 100.0,
+            }),
+            drop_frames: 0.05,
+            late_frames: Some(Occasional {
+                probability: 0.1,
+                ms: 20.0,
+            }),
+            ..FaultSettings::default()
+        };
+        let draw = |seed: u64| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let latencies: Vec<f64> = (0..20_000)
+                .map(|_| settings.draw_latency_ms(&mut rng))
+                .collect();
+            let fates: Vec<FrameFate> = (0..20_000)
+                .map(|_| settings.draw_frame_fate(&mut rng))
+                .collect();
+            (latencies, fates)
+        };
+        let (latencies, fates) = draw(7);
+        assert_eq!((latencies.clone(), fates.clone()), draw(7));
+        assert_ne!(latencies, draw(8).0);
+        let n = latencies.len() as f64;
+        assert!(latencies.iter().all(|&l| l >= 10.0));
+        let outliers = latencies.iter().filter(|&&l| l >= 100.0).count() as f64 / n;
+        assert!((outliers - 0.02).abs() < 0.005, "{outliers}");
+        // Half-normal jitter: mean σ√(2/π) ≈ 3.19 ms.
+        let usual: Vec<f64> = latencies.iter().copied().filter(|&l| l < 100.0).collect();
+        let mean = usual.iter().sum::<f64>() / usual.len() as f64 - 10.0;
+        assert!(
+            (mean - 4.0 * (2.0 / std::f64::consts::PI).sqrt()).abs() < 0.1,
+            "{mean}"
+        );
+        let dropped = fates.iter().filter(|f| **f == FrameFate::Drop).count() as f64 / n;
+        let late = fates
+            .iter()
+            .filter(|f| **f == FrameFate::Late(Duration::from_millis(20)))
+            .count() as f64
+            / n;
+        assert!((dropped - 0.05).abs() < 0.01, "{dropped}");
+        assert!((late - 0.095).abs() < 0.01, "{late}");
+        // Nothing set: no draw changes anything.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let calm = FaultSettings::default();
+        assert_eq!(calm.draw_latency_ms(&mut rng), 0.0);
+        assert_eq!(calm.draw_frame_fate(&mut rng), FrameFate::Send);
+    }
+
+    #[test]
     fn slow_replies_count_down_and_match_their_method() {
         let mut s = FaultSettings {
             slow: Some(SlowReplies {

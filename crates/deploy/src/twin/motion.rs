@@ -160,16 +160,19 @@ impl Drives {
         }
         let dt = now - self.time;
         if dt > 0.0 {
-            let delayed: Joints =
-                std::array::from_fn(|j| self.at(now - model[j].delay_ms / 1e3)[j]);
             for j in 0..6 {
+                let delay = model[j].delay_ms / 1e3;
+                let u0 = self.at(self.time - delay)[j];
+                let u1 = self.at(now - delay)[j];
                 let tau = model[j].tau_ms / 1e3;
-                let share = if tau > 0.0 {
-                    1.0 - (-dt / tau).exp()
+                // Exact over the step for an input linear between its ends.
+                self.output[j] = if tau > 0.0 {
+                    let slope = (u1 - u0) / dt;
+                    let decay = (-dt / tau).exp();
+                    u1 - slope * tau + (self.output[j] - u0 + slope * tau) * decay
                 } else {
-                    1.0
+                    u1
                 };
-                self.output[j] += (delayed[j] - self.output[j]) * share;
             }
             self.time = now;
             let longest = model.iter().fold(0.0_f64, |m, t| m.max(t.delay_ms / 1e3));
