@@ -28,6 +28,8 @@
 //!   once it ends, by a reset, if anything was commanded to move in it).
 //! - `TwinInjectFault(name, value)` → `0` (or `4` and a message in the log for a bad fault):
 //!   see [`faults`].
+//! - `TwinTracking()` → `[0, delay_ms, tau_ms, …]`: the drives' tracking in force, j1 to j6
+//!   (see [`faults`]).
 
 pub mod call_log;
 pub mod controller;

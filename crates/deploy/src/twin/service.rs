@@ -318,6 +318,15 @@ impl TwinService {
                     Value::Int(t.successes as i32),
                 ]))
             }
+            "TwinTracking" => {
+                let model = shared.controller().tracking();
+                let mut items = vec![Value::Int(codes::OK)];
+                for t in model {
+                    items.push(Value::Double(t.delay_ms));
+                    items.push(Value::Double(t.tau_ms));
+                }
+                Ok(Value::Array(items))
+            }
             "TwinInjectFault" => run(&|| {
                 a.count(2)?;
                 let name = a.text(0)?;
