@@ -160,11 +160,11 @@ impl Drives {
         }
         let dt = now - self.time;
         if dt > 0.0 {
-            for j in 0..6 {
-                let delay = model[j].delay_ms / 1e3;
+            for (j, drive) in model.iter().enumerate() {
+                let delay = drive.delay_ms / 1e3;
                 let u0 = self.at(self.time - delay)[j];
                 let u1 = self.at(now - delay)[j];
-                let tau = model[j].tau_ms / 1e3;
+                let tau = drive.tau_ms / 1e3;
                 // Exact over the step for an input linear between its ends.
                 self.output[j] = if tau > 0.0 {
                     let slope = (u1 - u0) / dt;
