@@ -57,9 +57,16 @@ pub struct TwinArgs {
     #[arg(long, default_value_t = 0.0)]
     pub joint_noise_deg: f64,
     /// Any other fault from the start, `NAME=VALUE` (repeatable): stream_latency_ms,
-    /// pose_noise_mm, slow, stall, error, estop, safety_stop (see the twin's documentation).
+    /// pose_noise_mm, slow, stall, error, estop, safety_stop, latency_jitter_ms,
+    /// latency_outliers, drop_frames, late_frames, tracking, following_error_deg,
+    /// servoj_speed_tolerance, brake_decel_deg_s2 (see the twin's documentation).
     #[arg(long = "fault", value_name = "NAME=VALUE")]
     pub faults: Vec<String>,
+    /// A controller as strict as a real one on a real network: drives 8 ms behind their set
+    /// points with a 15 ms lag, replies jittering (2 ms, one in 200 a further 30 ms late), one
+    /// CNDE frame in 100 lost and one in 100 held 20 ms. `--fault` flags given too apply after.
+    #[arg(long)]
+    pub strict: bool,
     /// Seed of the first cube placement and of the injected noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -124,7 +131,11 @@ fn environment(args: &TwinArgs) -> Result<(String, toml::Table)> {
 }
 
 fn faults(args: &TwinArgs) -> Result<Vec<FaultCommand>> {
-    let mut faults = Vec::new();
+    let mut faults = if args.strict {
+        fairgrasp_deploy::twin::faults::strict()
+    } else {
+        Vec::new()
+    };
     if args.latency_ms != 0.0 {
         faults.push(
             FaultCommand::parse("latency_ms", &args.latency_ms.to_string())
@@ -295,5 +306,21 @@ mod tests {
         assert!(environment(&bad).is_ok(), "checked when the twin starts");
         let missing = args(&["--model", "/nonexistent/model"]);
         assert!(environment(&missing).is_err());
+    }
+
+    #[test]
+    fn strict_turns_on_the_documented_set_and_flags_apply_after() {
+        let strict = fairgrasp_deploy::twin::faults::strict();
+        let a = args(&["--strict", "--fault", "tracking=off"]);
+        let f = faults(&a).unwrap();
+        assert_eq!(f.len(), strict.len() + 1);
+        assert_eq!(&f[..strict.len()], &strict[..]);
+        assert_eq!(f.last(), Some(&FaultCommand::Tracking(Default::default())));
+        assert!(
+            strict
+                .iter()
+                .any(|f| matches!(f, FaultCommand::Tracking(m) if m[0].tau_ms > 0.0))
+        );
+        assert!(faults(&args(&[])).unwrap().is_empty());
     }
 }

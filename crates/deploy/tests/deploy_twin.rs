@@ -9,6 +9,7 @@ use common::{shared_host_safety, twin_client};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunReport, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::{Twin, TwinConfig, TwinHandle};
 use fairgrasp_rl::policies::Policy;
 use std::path::PathBuf;
@@ -23,7 +24,17 @@ fn model_dir() -> PathBuf {
 /// Runs the loop against a fresh twin; `fault` (name, value) is injected once the twin has
 /// received `after` ServoJ calls. Returns the report and the twin.
 fn run_with(fault: Option<(&str, &str)>, after: usize, episodes: u32) -> (RunReport, TwinHandle) {
-    let twin = Twin::spawn(TwinConfig::ephemeral()).unwrap();
+    run_on(TwinConfig::ephemeral(), fault, after, episodes)
+}
+
+/// The same on a twin set up by `config`.
+fn run_on(
+    config: TwinConfig,
+    fault: Option<(&str, &str)>,
+    after: usize,
+    episodes: u32,
+) -> (RunReport, TwinHandle) {
+    let twin = Twin::spawn(config).unwrap();
     let client = twin_client(&twin);
     let policy = Policy::load(&model_dir()).unwrap();
     let calibration = Calibration::identity(&ModelIo::for_policy(&policy).unwrap().limits_rad);
@@ -121,6 +132,48 @@ fn a_controller_error_code_stops_the_arm_and_is_explained() {
         text.contains("main_code 14") && text.contains("execution failed"),
         "{text}"
     );
+}
+
+/// Drives lagging absurdly (a 5 s time constant) leave the joints behind their set points: the
+/// controller's following error stops the arm and the loop names it. (The fixture policy moves
+/// the arm a few degrees, so the limit is 1°; the same twin without the lag runs clean.)
+#[test]
+fn a_following_error_stops_the_arm_and_is_named() {
+    let config = || TwinConfig {
+        faults: vec![FaultCommand::FollowingErrorDeg(Some(1.0))],
+        ..TwinConfig::ephemeral()
+    };
+    let (clean, _) = run_on(config(), None, 0, 1);
+    assert!(clean.fault.is_none(), "{:?}", clean.fault);
+    let (report, twin) = run_on(config(), Some(("tracking", "0,5000")), 1, 1);
+    check_stopped(&report, &twin, "controller_fault");
+    let text = report.fault.unwrap().to_string();
+    assert!(
+        text.contains("main_code 200") && text.contains("following error"),
+        "{text}"
+    );
+}
+
+/// On a twin as strict as a real controller (`fairgrasp twin --strict`: lagging drives,
+/// jittering replies, lost and late frames) the fixture policy runs its episodes without a
+/// fault, and the ServoJ rule never refuses the loop's set points.
+#[test]
+fn without_faults_episodes_run_on_a_strict_twin() {
+    let config = TwinConfig {
+        faults: fairgrasp_deploy::twin::faults::strict(),
+        ..TwinConfig::ephemeral()
+    };
+    let (report, twin) = run_on(config, None, 0, 2);
+    assert!(report.fault.is_none(), "{:?}", report.fault);
+    assert_eq!(report.episodes.len(), 2);
+    assert!(twin.tracking()[0].tau_ms > 0.0);
+    let refused = twin
+        .calls()
+        .iter()
+        .filter(|c| c.method == "ServoJ" && c.reply != serde_json::json!(0))
+        .count();
+    assert_eq!(refused, 0);
+    assert_eq!(twin.state().main_code, 0);
 }
 
 #[test]

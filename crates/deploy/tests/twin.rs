@@ -272,6 +272,17 @@ fn gating_and_servo_rules_over_xmlrpc() {
     let mut over = q;
     over[1] = 500.0;
     assert_eq!(code(&c, "ServoJ", &servo(&over)), 29);
+    assert_eq!(
+        code(&c, "ServoJ", &servo(&q)),
+        14,
+        "the error ended the session"
+    );
+    assert_eq!(code(&c, "ResetAllError", &[]), 0);
+    assert!(eventually(Duration::from_secs(5), || code(
+        &c,
+        "ServoMoveStart",
+        &[]
+    ) == 0));
     assert_eq!(code(&c, "ServoJ", &servo(&q)), 0);
     assert_eq!(code(&c, "ServoMoveEnd", &[]), 0);
     assert_eq!(
@@ -642,4 +653,99 @@ fn servo_commands_over_udp_move_the_arm_and_bad_datagrams_are_refused() {
     let j0 = twin.state().joints_deg[0];
     // Settled where the stream left it (the PD drive's overshoot is ~0.1°), not at 30°.
     assert!((j0 - q[0]).abs() < 0.5, "{j0} vs {}", q[0]);
+}
+
+fn servo_j(q: &[f64; 6], cmd_t: f64) -> Vec<Value> {
+    vec![
+        Value::doubles(q),
+        Value::doubles(&[0.0; 4]),
+        Value::Double(0.0),
+        Value::Double(0.0),
+        Value::Double(cmd_t),
+        Value::Double(0.0),
+        Value::Double(0.0),
+        Value::Int(0),
+    ]
+}
+
+/// A ServoJ step faster than the joint can go is the controller's error 29: the reply says so,
+/// the stream shows main_code 29 with the joint, the session ends and the arm brakes to rest
+/// near where it was, not at the jump's target.
+#[test]
+fn a_servo_jump_answers_29_shows_in_the_stream_and_stops_the_arm() {
+    let twin = twin();
+    let c = client(&twin);
+    let stream = cnde(&twin);
+    let q = joints(&c);
+    assert_eq!(code(&c, "ServoMoveStart", &[]), 0);
+    let mut target = q;
+    for _ in 0..25 {
+        target[0] += 0.4;
+        assert_eq!(code(&c, "ServoJ", &servo_j(&target, 0.008)), 0);
+        std::thread::sleep(Duration::from_millis(8));
+    }
+    let mut jump = target;
+    jump[0] += 20.0;
+    assert_eq!(code(&c, "ServoJ", &servo_j(&jump, 0.008)), 29);
+    assert!(
+        eventually(Duration::from_secs(5), || {
+            let s = stream.latest().unwrap().state;
+            (s.main_code, s.sub_code) == (29, 11)
+        }),
+        "main_code 29, sub_code 11 (j1 too fast) in the stream"
+    );
+    assert_eq!(code(&c, "ServoJ", &servo_j(&target, 0.008)), 14);
+    assert!(eventually(Duration::from_secs(5), || {
+        stream.latest().unwrap().state.motion_done
+    }));
+    let rest = joints(&c);
+    // At most 50 deg/s when it stopped: 1.7° of braking at 720 deg/s² past the set point.
+    assert!(
+        rest[0] < target[0] + 3.0,
+        "stopped at {} (last target {}, jump {})",
+        rest[0],
+        target[0],
+        jump[0]
+    );
+    assert_eq!(code(&c, "ResetAllError", &[]), 0);
+    assert!(eventually(Duration::from_secs(5), || {
+        stream.latest().unwrap().state.main_code == 0
+    }));
+    assert_eq!(code(&c, "ServoMoveStart", &[]), 0);
+    assert_eq!(code(&c, "ServoMoveEnd", &[]), 0);
+}
+
+/// The strict set over XML-RPC: TwinTracking reports the drives' model in force, and the
+/// reported joint lags a MoveJ's set point.
+#[test]
+fn tracking_is_injectable_and_reported() {
+    let twin = twin();
+    let c = client(&twin);
+    assert_eq!(
+        numbers(&c, "TwinTracking", &[]),
+        [0.0; 13].to_vec(),
+        "off by default"
+    );
+    let inject = |name: &str, value: &str| {
+        code(
+            &c,
+            "TwinInjectFault",
+            &[Value::String(name.into()), Value::String(value.into())],
+        )
+    };
+    assert_eq!(inject("tracking", "8,15"), 0);
+    assert_eq!(inject("tracking", "8,15,1"), 4, "a bad value is refused");
+    let reported = numbers(&c, "TwinTracking", &[]);
+    assert_eq!(&reported[..3], &[0.0, 8.0, 15.0]);
+    assert_eq!(twin.tracking()[5].tau_ms, 15.0);
+    for fault in fairgrasp_deploy::twin::faults::strict() {
+        twin.inject(fault);
+    }
+    let q = joints(&c);
+    let mut target = q;
+    target[0] += 10.0;
+    assert_eq!(code(&c, "MoveJ", &move_j(&target, 30.0)), 0);
+    assert!((joints(&c)[0] - target[0]).abs() < 1.0);
+    twin.inject(FaultCommand::Clear);
+    assert_eq!(numbers(&c, "TwinTracking", &[]), [0.0; 13].to_vec());
 }

@@ -63,6 +63,9 @@ pub fn error_code_meaning(code: i64) -> &'static str {
         108 => "wrong spiral start point",
         112 => "target pose unreachable",
         130 => "point table not found",
+        // Not a FAIRINO code: the twin's main_code for a following error (FAIRINO documents
+        // none), so a rehearsal's stop names its cause.
+        200 => "following error (the fairgrasp twin's main_code)",
         _ => "unknown error code",
     }
 }

@@ -20,15 +20,32 @@
 //!   than 1°/s), or [`ControllerConfig::settle_timeout`] after the profile's end. Refused with 14
 //!   during a servo session.
 //! - **Servo**: `ServoJ` outside a `ServoMoveStart`…`ServoMoveEnd` session → 14; `cmdT` outside
-//!   0.001…0.016 s → 4; a target beyond the joint limits → 29 and nothing moves. Each accepted
-//!   target is reached along a straight line over `cmdT`, the set point never faster than the
-//!   joint's maximum speed.
-//! - **`StopMotion`** aborts every move (a waiting `MoveJ` returns 14) and the servo session;
-//!   the arm holds its current set point. A fault, the e-stop (31), a safety stop (99),
-//!   disabling (101) or manual mode (14) abort the same way, with their code.
+//!   0.001…0.016 s → 4. A target beyond the joint limits, or one further from the previous
+//!   target (the set point, for a session's first) than the joint's top speed
+//!   ([`fr5::MAX_SPEED_DEG_S`], plus [`ControllerConfig::servo_speed_tolerance`]) covers in
+//!   `cmdT`, is the controller's error: the call answers 29, `main_code` 29 shows with the
+//!   joint in `sub_code` (1–6 past a limit, 11–16 too fast: [`MAIN_CODE_SERVOJ_OVER_LIMIT`]),
+//!   and the arm brakes. Each accepted target is reached along a straight line over `cmdT`
+//!   (the set point never faster than the joint's top speed).
+//! - **`StopMotion`** aborts every move (a waiting `MoveJ` returns 14) and the servo session.
+//!   A fault, the e-stop (31), a safety stop (99), disabling (101) or manual mode (14) abort the
+//!   same way, with their code.
+//! - **Braking**: an aborted motion does not stop dead. The set point decelerates from its
+//!   speed at [`ControllerConfig::brake_decel_deg_s2`], every joint stopping at the same
+//!   moment (along the path it was on), so the arm overshoots where it was stopped by v²/2a;
+//!   the drives' lag adds to it. The arm reports moving until the brake ends; a `MoveJ` sent
+//!   meanwhile starts after it, `ServoMoveStart` is refused (14).
+//! - **Drives** ([`ControllerConfig::tracking`]): the set point reaches each joint after a
+//!   pure delay and a first-order lag (off by default: the simulated arm follows the set
+//!   point directly). [`Controller::setpoint`] is what the drives command, so the reported
+//!   joints and speeds are the arm's, lag included. A joint further than
+//!   [`ControllerConfig::following_error_deg`] from its set point is a following error:
+//!   `main_code` 200 ([`MAIN_CODE_FOLLOWING_ERROR`], chosen: FAIRINO documents no number),
+//!   `sub_code` the joint, and the arm brakes.
 //! - **Faults**: `main_code`/`sub_code` of the state. The e-stop sets main code 31, sub code 1
 //!   ([`MAIN_CODE_EMERGENCY_STOP`]), which `ResetAllError` clears once the button is released
-//!   (while pressed: 14). An injected fault is resettable unless injected otherwise (then 30).
+//!   (while pressed: 14). An injected fault is resettable unless injected otherwise (then 30);
+//!   the ServoJ and following-error faults are resettable.
 //!   Safety stops show in their own flags, not in `main_code`.
 //! - **Gripper**: `ActGripper(index 1…8, 1)` activates, `(…, 0)` resets; `MoveGripper` before
 //!   activation → 73; position, speed and force in 0…100 % (else 4); `maxtime` 0…30000 ms (0:
@@ -40,8 +57,9 @@
 //!   TCP as if the gripper were configured as the tool). Poses are `[x, y, z, rx, ry, rz]` in mm
 //!   and degrees, base frame, `R = Rz(rz)·Ry(ry)·Rx(rx)` (fixed X-Y-Z angles). IK failure → 28.
 
+use super::faults::TrackingModel;
 use super::gripper::Gripper;
-use super::motion::{Joints, Profile, ServoStep, max_gap, rate_limited};
+use super::motion::{Brake, Drives, Joints, Profile, ServoStep, max_gap, rate_limited};
 use crate::fairino::fr5;
 use crate::robot::RobotState;
 use fairgrasp_sim::kinematics::SerialChain;
@@ -66,6 +84,22 @@ pub mod codes {
 
 /// `(main_code, sub_code)` while the e-stop is pressed, and after until reset.
 pub const MAIN_CODE_EMERGENCY_STOP: (i32, i32) = (31, 1);
+
+/// `main_code` of a refused ServoJ: the call's own code 29; `sub_code` is the joint (1–6) past
+/// its limit, or 10 + the joint that would move too fast.
+pub const MAIN_CODE_SERVOJ_OVER_LIMIT: i32 = 29;
+
+/// `main_code` of a following error, `sub_code` the joint (1–6). FAIRINO documents no number
+/// for it; the twin's choice, outside the documented ones.
+pub const MAIN_CODE_FOLLOWING_ERROR: i32 = 200;
+
+/// The ServoJ speed tolerance by default: 5 % over the published top speed.
+pub const DEFAULT_SERVO_SPEED_TOLERANCE: f64 = 0.05;
+/// The braking deceleration by default (deg/s²): FAIRINO publishes none; 720 stops a joint from
+/// its top speed in a quarter second.
+pub const DEFAULT_BRAKE_DECEL_DEG_S2: f64 = 720.0;
+/// The following-error limit by default (deg): see [`ControllerConfig::following_error_deg`].
+pub const DEFAULT_FOLLOWING_ERROR_DEG: f64 = 20.0;
 
 /// How the controller is found at power-on.
 #[derive(Clone, Debug, PartialEq)]
@@ -96,6 +130,15 @@ pub struct ControllerConfig {
     /// A move counts as done this long after its profile ended, settled or not (s).
     pub settle_timeout: f64,
     pub start: StartState,
+    /// How far a ServoJ step may exceed the top speed, as a share of it.
+    pub servo_speed_tolerance: f64,
+    /// The set point's deceleration when the arm stops (deg/s²).
+    pub brake_decel_deg_s2: f64,
+    /// The largest gap between a joint's set point and the joint before it is a fault (deg);
+    /// `None`: not checked.
+    pub following_error_deg: Option<f64>,
+    /// How the drives follow their set points.
+    pub tracking: TrackingModel,
 }
 
 impl ControllerConfig {
@@ -110,6 +153,10 @@ impl ControllerConfig {
             max_acc_deg: fr5::MOVE_J_FULL_ACC_DEG_S2,
             settle_timeout: 1.0,
             start,
+            servo_speed_tolerance: DEFAULT_SERVO_SPEED_TOLERANCE,
+            brake_decel_deg_s2: DEFAULT_BRAKE_DECEL_DEG_S2,
+            following_error_deg: Some(DEFAULT_FOLLOWING_ERROR_DEG),
+            tracking: TrackingModel::default(),
         }
     }
 }
@@ -168,12 +215,18 @@ pub struct Controller {
     fault: Option<Fault>,
     setpoint: Joints,
     setpoint_time: f64,
+    /// The set point's speed (deg/s).
+    velocity: Joints,
+    brake: Option<Brake>,
+    drives: Drives,
     /// When the latest measurement was taken (s): the clock the state reports.
     measured_at: f64,
     active: Option<ActiveMove>,
     queue: VecDeque<QueuedMove>,
     servo_session: bool,
     servo_step: Option<ServoStep>,
+    /// The last target of the servo session, what the next step is measured from.
+    servo_reference: Option<Joints>,
     next_ticket: u64,
     outcomes: VecDeque<(u64, i32)>,
     measured: Measured,
@@ -222,11 +275,15 @@ impl Controller {
             fault: None,
             setpoint: home_deg,
             setpoint_time: now,
+            velocity: [0.0; 6],
+            brake: None,
+            drives: Drives::new(home_deg, now),
             measured_at: now,
             active: None,
             queue: VecDeque::new(),
             servo_session: false,
             servo_step: None,
+            servo_reference: None,
             next_ticket: 1,
             outcomes: VecDeque::new(),
             measured: Measured {
@@ -269,7 +326,8 @@ impl Controller {
         self.outcomes.push_back((ticket, code));
     }
 
-    /// Stops every motion where the set point is now; waiting moves end with `code`.
+    /// Stops every motion, braking from the set point's speed now; waiting moves end with
+    /// `code`.
     fn abort(&mut self, now: f64, code: i32) {
         self.advance(now);
         if let Some(active) = self.active.take() {
@@ -280,6 +338,20 @@ impl Controller {
         }
         self.servo_session = false;
         self.servo_step = None;
+        self.servo_reference = None;
+        if self.brake.is_none() {
+            self.brake = Brake::new(
+                self.setpoint,
+                self.velocity,
+                self.setpoint_time,
+                self.config.brake_decel_deg_s2,
+            );
+        }
+    }
+
+    /// The controller's own error: a resettable fault, the arm brakes.
+    fn raise(&mut self, now: f64, main: i32, sub: i32) {
+        self.set_fault(now, main, sub, true);
     }
 
     /// The outcome of move `ticket`: `None` while it is queued or moving; a code once it ended
@@ -386,9 +458,14 @@ impl Controller {
     // ── Arm motion ─────────────────────────────────────────────────────────
 
     fn within_limits(&self, q: &Joints) -> bool {
+        self.outside_limits(q).is_none()
+    }
+
+    /// The first joint of `q` outside its limits.
+    fn outside_limits(&self, q: &Joints) -> Option<usize> {
         q.iter()
             .zip(&self.config.limits_deg)
-            .all(|(v, (lo, hi))| v.is_finite() && *v >= lo - 1e-9 && *v <= hi + 1e-9)
+            .position(|(v, (lo, hi))| !(v.is_finite() && *v >= lo - 1e-9 && *v <= hi + 1e-9))
     }
 
     /// `MoveJ`: queues a move to `target` at `vel` % of the top joint speed and `acc` % of the
@@ -432,6 +509,14 @@ impl Controller {
 
     fn start_next(&mut self, now: f64) {
         self.advance(now);
+        self.begin_next(now);
+    }
+
+    /// Starts the next queued move from the set point, unless the arm is braking.
+    fn begin_next(&mut self, now: f64) {
+        if self.brake.is_some() {
+            return;
+        }
         self.servo_step = None;
         if let Some(next) = self.queue.pop_front() {
             let speed = self.config.max_speed_deg.map(|v| v * next.speed_scale);
@@ -448,10 +533,11 @@ impl Controller {
         if let Some(code) = self.motion_refusal() {
             return code;
         }
-        if self.active.is_some() || !self.queue.is_empty() {
+        if self.active.is_some() || !self.queue.is_empty() || self.brake.is_some() {
             return codes::EXECUTION_FAILED;
         }
         self.servo_session = true;
+        self.servo_reference = None;
         codes::OK
     }
 
@@ -466,10 +552,21 @@ impl Controller {
         if !(0.001..=0.016).contains(&cmd_t) || !finite(&target) {
             return codes::PARAM_VALUE;
         }
-        if !self.within_limits(&target) {
+        if let Some(j) = self.outside_limits(&target) {
+            self.raise(now, MAIN_CODE_SERVOJ_OVER_LIMIT, j as i32 + 1);
             return codes::SERVOJ_OVER_LIMIT;
         }
         self.advance(now);
+        let reference = self.servo_reference.unwrap_or(self.setpoint);
+        let tolerance = 1.0 + self.config.servo_speed_tolerance;
+        let too_fast = (0..6).find(|&j| {
+            (target[j] - reference[j]).abs() > self.config.max_speed_deg[j] * tolerance * cmd_t
+        });
+        if let Some(j) = too_fast {
+            self.raise(now, MAIN_CODE_SERVOJ_OVER_LIMIT, j as i32 + 11);
+            return codes::SERVOJ_OVER_LIMIT;
+        }
+        self.servo_reference = Some(target);
         self.servo_step = Some(ServoStep {
             from: self.setpoint,
             to: target,
@@ -492,23 +589,43 @@ impl Controller {
         codes::OK
     }
 
-    /// Moves the set point along the motion under way to time `now`.
+    /// Moves the set point along the motion under way to time `now` (never back: callers'
+    /// clocks differ by a physics step).
     fn advance(&mut self, now: f64) {
         let dt = now - self.setpoint_time;
-        if let Some(active) = &self.active {
+        if dt <= 0.0 {
+            return;
+        }
+        let before = self.setpoint;
+        let mut braked = false;
+        if let Some(brake) = &self.brake {
+            self.setpoint = brake.at(now);
+            if brake.finished(now) {
+                self.brake = None;
+                braked = true;
+            }
+        } else if let Some(active) = &self.active {
             self.setpoint = active.profile.at(now);
         } else if let Some(step) = &self.servo_step {
             let desired = step.at(now);
             self.setpoint = rate_limited(&self.setpoint, &desired, &self.config.max_speed_deg, dt);
         }
-        self.setpoint_time = self.setpoint_time.max(now);
+        self.velocity = std::array::from_fn(|j| (self.setpoint[j] - before[j]) / dt);
+        self.setpoint_time = now;
+        if braked {
+            self.velocity = [0.0; 6];
+            if self.active.is_none() {
+                self.begin_next(now);
+            }
+        }
     }
 
-    /// Whether the arm is commanded to be still: no move queued or under way, the last servo
-    /// target reached by the set point.
+    /// Whether the arm is commanded to be still: no move queued or under way, not braking,
+    /// the last servo target reached by the set point.
     pub fn motion_done(&self) -> bool {
         self.active.is_none()
             && self.queue.is_empty()
+            && self.brake.is_none()
             && self.servo_step.as_ref().is_none_or(|s| {
                 s.finished(self.setpoint_time) && max_gap(&s.to, &self.setpoint) < 1e-6
             })
@@ -612,20 +729,72 @@ impl Controller {
 
     // ── The simulation's side ──────────────────────────────────────────────
 
-    /// The set points for time `now`.
+    /// The set points the drives command at time `now` (the controller's set point through
+    /// the drives' tracking).
     pub fn setpoint(&mut self, now: f64) -> Setpoint {
         self.advance(now);
+        let joints_deg = self.drives.follow(
+            &self.config.tracking,
+            self.setpoint_time,
+            self.setpoint,
+            now,
+        );
         Setpoint {
-            joints_deg: self.setpoint,
+            joints_deg,
             gripper_percent: self.gripper.setpoint(now),
         }
     }
 
-    /// Feeds what the simulation measured at `now`; ends moves that have arrived.
+    /// The controller's own set point (before the drives' tracking).
+    pub fn command(&self) -> Joints {
+        self.setpoint
+    }
+
+    /// How the drives follow their set points now.
+    pub fn tracking(&self) -> TrackingModel {
+        self.config.tracking
+    }
+
+    pub fn set_tracking(&mut self, tracking: TrackingModel) {
+        self.config.tracking = tracking;
+    }
+
+    pub fn set_following_error(&mut self, limit_deg: Option<f64>) {
+        self.config.following_error_deg = limit_deg;
+    }
+
+    pub fn set_servo_speed_tolerance(&mut self, share: f64) {
+        self.config.servo_speed_tolerance = share;
+    }
+
+    pub fn set_brake_decel(&mut self, deg_s2: f64) {
+        self.config.brake_decel_deg_s2 = deg_s2;
+    }
+
+    /// Tracking, following-error limit, ServoJ tolerance and braking back to their defaults.
+    pub fn restore_drive_defaults(&mut self) {
+        self.config.tracking = TrackingModel::default();
+        self.config.following_error_deg = Some(DEFAULT_FOLLOWING_ERROR_DEG);
+        self.config.servo_speed_tolerance = DEFAULT_SERVO_SPEED_TOLERANCE;
+        self.config.brake_decel_deg_s2 = DEFAULT_BRAKE_DECEL_DEG_S2;
+    }
+
+    /// Feeds what the simulation measured at `now`; ends moves that have arrived; a joint too
+    /// far from its set point is a following error.
     pub fn observe(&mut self, now: f64, measured: Measured) {
         self.gripper.observe(now, measured.gripper_percent);
         self.measured = measured;
         self.measured_at = now;
+        if let Some(limit) = self.config.following_error_deg
+            && self.fault.is_none()
+            && self.enabled
+        {
+            let lagging =
+                (0..6).find(|&j| (self.setpoint[j] - self.measured.joints_deg[j]).abs() > limit);
+            if let Some(j) = lagging {
+                self.raise(now, MAIN_CODE_FOLLOWING_ERROR, j as i32 + 1);
+            }
+        }
         let Some(active) = &self.active else {
             return;
         };
@@ -648,7 +817,10 @@ impl Controller {
     /// aborted (14), faults and settings stay.
     pub fn rehome(&mut self, now: f64, q_deg: Joints) {
         self.abort(now, codes::EXECUTION_FAILED);
+        self.brake = None;
         self.setpoint = q_deg;
+        self.velocity = [0.0; 6];
+        self.drives = Drives::new(q_deg, now);
         self.measured.joints_deg = q_deg;
         self.measured.joint_speeds_deg = [0.0; 6];
         self.gripper.hold_at(100.0);

@@ -18,11 +18,43 @@
 //! | `error` | `MAIN,SUB[,fatal]`, `0` | a controller fault in main_code/sub_code: the arm stops; `fatal` ones `ResetAllError` cannot clear (30); 0 clears |
 //! | `estop` | 1 / 0 | the e-stop is pressed (the arm stops, main_code 31) / released |
 //! | `safety_stop` | 1 / 0 / `A,B` | safety-stop inputs 0 and 1 (1 sets both): the arm stops, motion calls get 99 |
+//! | `latency_jitter_ms` | ms | each reply's latency gets a half-normal extra of this standard deviation (|N(0, σ)|), drawn per call |
+//! | `latency_outliers` | `PROB,MS`, `off` | with probability PROB a reply comes MS later still |
+//! | `drop_frames` | probability | each CNDE frame is left out with this probability (the next comes a period later) |
+//! | `late_frames` | `PROB,MS`, `off` | with probability PROB a CNDE frame is held MS (showing the state of when it was due); the period restarts after it, so frames never bunch |
+//! | `tracking` | `DELAY_MS,TAU_MS`, six such pairs (12 numbers, j1 first), `off` | the drives follow the set point after a pure delay, then a first-order lag of time constant TAU; the reported joints and speeds are the drives' (off by default) |
+//! | `following_error_deg` | deg, `off` | a set point and actual joint further apart than this is a fault: the arm brakes, main_code 200, sub_code the joint (default 20°) |
+//! | `servoj_speed_tolerance` | fraction | a ServoJ step may exceed the joint's top speed by this share before it is refused with 29 (default 0.05) |
+//! | `brake_decel_deg_s2` | deg/s² | how hard the set point brakes when the arm stops (default 720) |
 //! | `clear` | any | everything above back to normal, faults cleared |
+//!
+//! Draws (jitter, outliers, dropped and late frames) come from random streams seeded by the
+//! twin's seed, so a run with the same calls in the same order draws the same delays.
+//! [`strict`] is the set `fairgrasp twin --strict` turns on.
 //!
 //! The `Twin…` methods themselves are never delayed, so a test can always reach the twin.
 
+use crate::fairino::cnde::FrameFate;
 use std::fmt;
+use std::time::Duration;
+
+/// One joint drive's tracking: the set point reaches the motor after a pure delay, then
+/// through a first-order lag.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JointTracking {
+    pub delay_ms: f64,
+    pub tau_ms: f64,
+}
+
+/// The six drives' tracking, j1 first; all zero: the drives are the set point.
+pub type TrackingModel = [JointTracking; 6];
+
+/// A share of events and the delay each gets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Occasional {
+    pub probability: f64,
+    pub ms: f64,
+}
 
 /// Delay of slow replies.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,6 +76,10 @@ pub struct FaultSettings {
     pub pose_noise_mm: f64,
     pub slow: Option<SlowReplies>,
     pub stalled: bool,
+    pub latency_jitter_ms: f64,
+    pub latency_outliers: Option<Occasional>,
+    pub drop_frames: f64,
+    pub late_frames: Option<Occasional>,
 }
 
 impl FaultSettings {
@@ -64,6 +100,33 @@ impl FaultSettings {
         }
         delay
     }
+
+    /// One reply's latency (ms): the base, a half-normal jitter, sometimes an outlier.
+    pub fn draw_latency_ms(&self, rng: &mut impl rand::Rng) -> f64 {
+        let mut ms = self.latency_ms;
+        if self.latency_jitter_ms > 0.0 {
+            ms += (self.latency_jitter_ms * gaussian(rng)).abs();
+        }
+        if let Some(o) = self.latency_outliers
+            && rng.random::<f64>() < o.probability
+        {
+            ms += o.ms;
+        }
+        ms
+    }
+
+    /// What happens to one CNDE frame that is due.
+    pub fn draw_frame_fate(&self, rng: &mut impl rand::Rng) -> FrameFate {
+        if self.drop_frames > 0.0 && rng.random::<f64>() < self.drop_frames {
+            return FrameFate::Drop;
+        }
+        match self.late_frames {
+            Some(o) if rng.random::<f64>() < o.probability => {
+                FrameFate::Late(Duration::from_secs_f64(o.ms / 1000.0))
+            }
+            _ => FrameFate::Send,
+        }
+    }
 }
 
 /// One fault to inject (see the [module](self) documentation).
@@ -76,14 +139,27 @@ pub enum FaultCommand {
     Slow(Option<SlowReplies>),
     Stall(bool),
     ResetStream,
-    Error { main: i32, sub: i32, fatal: bool },
+    Error {
+        main: i32,
+        sub: i32,
+        fatal: bool,
+    },
     Estop(bool),
     SafetyStop([bool; 2]),
+    LatencyJitterMs(f64),
+    LatencyOutliers(Option<Occasional>),
+    DropFrames(f64),
+    LateFrames(Option<Occasional>),
+    Tracking(TrackingModel),
+    /// `None`: not checked.
+    FollowingErrorDeg(Option<f64>),
+    ServojSpeedTolerance(f64),
+    BrakeDecelDegS2(f64),
     Clear,
 }
 
 /// The fault names [`FaultCommand::parse`] knows.
-pub const FAULT_NAMES: [&str; 11] = [
+pub const FAULT_NAMES: [&str; 19] = [
     "latency_ms",
     "stream_latency_ms",
     "joint_noise_deg",
@@ -94,8 +170,41 @@ pub const FAULT_NAMES: [&str; 11] = [
     "error",
     "estop",
     "safety_stop",
+    "latency_jitter_ms",
+    "latency_outliers",
+    "drop_frames",
+    "late_frames",
+    "tracking",
+    "following_error_deg",
+    "servoj_speed_tolerance",
+    "brake_decel_deg_s2",
     "clear",
 ];
+
+/// `fairgrasp twin --strict`: a controller as a real one behaves on a real network. None of
+/// these figures is published by FAIRINO; each is a modest choice (docs/deployment.md):
+/// drives 8 ms behind their set point with a 15 ms lag, replies jittering by 2 ms with one
+/// in 200 a further 30 ms late, one CNDE frame in 100 lost and one in 100 held 20 ms.
+pub fn strict() -> Vec<FaultCommand> {
+    vec![
+        FaultCommand::Tracking(
+            [JointTracking {
+                delay_ms: 8.0,
+                tau_ms: 15.0,
+            }; 6],
+        ),
+        FaultCommand::LatencyJitterMs(2.0),
+        FaultCommand::LatencyOutliers(Some(Occasional {
+            probability: 0.005,
+            ms: 30.0,
+        })),
+        FaultCommand::DropFrames(0.01),
+        FaultCommand::LateFrames(Some(Occasional {
+            probability: 0.01,
+            ms: 20.0,
+        })),
+    ]
+}
 
 fn number(name: &str, value: &str, max: f64) -> Result<f64, String> {
     let v: f64 = value
@@ -171,6 +280,29 @@ impl FaultCommand {
                     _ => return Err(format!("safety_stop: expected 1, 0 or A,B, got `{value}`")),
                 }
             }
+            "latency_jitter_ms" => Self::LatencyJitterMs(number(name, value, 10_000.0)?),
+            "latency_outliers" => Self::LatencyOutliers(occasional(name, value, 60_000.0)?),
+            "drop_frames" => Self::DropFrames(number(name, value, 1.0)?),
+            "late_frames" => Self::LateFrames(occasional(name, value, 1_000.0)?),
+            "tracking" => Self::Tracking(parse_tracking(value)?),
+            "following_error_deg" => Self::FollowingErrorDeg(match value.trim() {
+                "off" => None,
+                v => {
+                    let deg = number(name, v, 360.0)?;
+                    if deg <= 0.0 {
+                        return Err(format!("{name}: must be above 0 (or `off`)"));
+                    }
+                    Some(deg)
+                }
+            }),
+            "servoj_speed_tolerance" => Self::ServojSpeedTolerance(number(name, value, 10.0)?),
+            "brake_decel_deg_s2" => {
+                let v = number(name, value, 100_000.0)?;
+                if v < 1.0 {
+                    return Err(format!("{name}: must be at least 1 deg/s², got {v}"));
+                }
+                Self::BrakeDecelDegS2(v)
+            }
             "clear" => Self::Clear,
             other => {
                 return Err(format!(
@@ -187,6 +319,44 @@ impl FaultCommand {
             .split_once('=')
             .ok_or_else(|| format!("expected NAME=VALUE, got `{text}`"))?;
         Self::parse(name, value)
+    }
+}
+
+/// `PROB,MS` or `off`.
+fn occasional(name: &str, value: &str, max_ms: f64) -> Result<Option<Occasional>, String> {
+    let value = value.trim();
+    if value == "off" || value == "0" {
+        return Ok(None);
+    }
+    match value.split(',').collect::<Vec<_>>().as_slice() {
+        [p, ms] => Ok(Some(Occasional {
+            probability: number(name, p, 1.0)?,
+            ms: number(name, ms, max_ms)?,
+        })),
+        _ => Err(format!("{name}: expected PROB,MS or off, got `{value}`")),
+    }
+}
+
+/// `DELAY_MS,TAU_MS` for every joint, six such pairs, or `off`.
+fn parse_tracking(value: &str) -> Result<TrackingModel, String> {
+    let value = value.trim();
+    if value == "off" || value == "0" {
+        return Ok(TrackingModel::default());
+    }
+    let numbers = value
+        .split(',')
+        .map(|v| number("tracking", v, 10_000.0))
+        .collect::<Result<Vec<_>, _>>()?;
+    let pair = |k: usize| JointTracking {
+        delay_ms: numbers[2 * k],
+        tau_ms: numbers[2 * k + 1],
+    };
+    match numbers.len() {
+        2 => Ok([pair(0); 6]),
+        12 => Ok(std::array::from_fn(pair)),
+        n => Err(format!(
+            "tracking: expected DELAY_MS,TAU_MS (2 numbers) or six pairs (12), or off; got {n} numbers"
+        )),
     }
 }
 
@@ -250,6 +420,32 @@ impl fmt::Display for FaultCommand {
             Self::Estop(true) => write!(f, "e-stop pressed"),
             Self::Estop(false) => write!(f, "e-stop released"),
             Self::SafetyStop(s) => write!(f, "safety stop inputs {}, {}", s[0] as u8, s[1] as u8),
+            Self::LatencyJitterMs(v) => write!(f, "reply latency jitter {v} ms"),
+            Self::LatencyOutliers(None) => write!(f, "reply latency outliers off"),
+            Self::LatencyOutliers(Some(o)) => write!(
+                f,
+                "reply latency outliers: {} of replies {} ms later",
+                o.probability, o.ms
+            ),
+            Self::DropFrames(p) => write!(f, "state stream drops {p} of its frames"),
+            Self::LateFrames(None) => write!(f, "late state frames off"),
+            Self::LateFrames(Some(o)) => write!(
+                f,
+                "state stream holds {} of its frames {} ms",
+                o.probability, o.ms
+            ),
+            Self::Tracking(m) if *m == TrackingModel::default() => write!(f, "drive tracking off"),
+            Self::Tracking(m) => {
+                write!(f, "drive tracking (delay ms, lag ms):")?;
+                for t in m {
+                    write!(f, " ({}, {})", t.delay_ms, t.tau_ms)?;
+                }
+                Ok(())
+            }
+            Self::FollowingErrorDeg(None) => write!(f, "following error not checked"),
+            Self::FollowingErrorDeg(Some(v)) => write!(f, "following error limit {v}°"),
+            Self::ServojSpeedTolerance(v) => write!(f, "ServoJ speed tolerance {v}"),
+            Self::BrakeDecelDegS2(v) => write!(f, "braking deceleration {v} deg/s²"),
             Self::Clear => write!(f, "all faults cleared"),
         }
     }
@@ -310,6 +506,117 @@ mod tests {
             assert!(e.contains(name), "{e}");
         }
         assert!(FaultCommand::parse_assignment("estop").is_err());
+    }
+
+    #[test]
+    fn parses_the_strict_controller_settings() {
+        let pair = |d, t| JointTracking {
+            delay_ms: d,
+            tau_ms: t,
+        };
+        assert_eq!(
+            FaultCommand::parse("tracking", "8,15").unwrap(),
+            FaultCommand::Tracking([pair(8.0, 15.0); 6])
+        );
+        let six = FaultCommand::parse("tracking", "1,2,3,4,5,6,7,8,9,10,11,12").unwrap();
+        let FaultCommand::Tracking(m) = six else {
+            panic!("{six:?}")
+        };
+        assert_eq!((m[0], m[5]), (pair(1.0, 2.0), pair(11.0, 12.0)));
+        assert_eq!(
+            FaultCommand::parse("tracking", "off").unwrap(),
+            FaultCommand::Tracking(TrackingModel::default())
+        );
+        assert_eq!(
+            FaultCommand::parse_assignment("latency_outliers=0.01,40").unwrap(),
+            FaultCommand::LatencyOutliers(Some(Occasional {
+                probability: 0.01,
+                ms: 40.0
+            }))
+        );
+        assert_eq!(
+            FaultCommand::parse("following_error_deg", "off").unwrap(),
+            FaultCommand::FollowingErrorDeg(None)
+        );
+        assert_eq!(
+            FaultCommand::parse("drop_frames", "0.1").unwrap(),
+            FaultCommand::DropFrames(0.1)
+        );
+        for (name, value) in [
+            ("tracking", "1,2,3"),
+            ("tracking", "-1,2"),
+            ("drop_frames", "1.5"),
+            ("late_frames", "0.5"),
+            ("latency_outliers", "2,10"),
+            ("following_error_deg", "0"),
+            ("brake_decel_deg_s2", "0"),
+            ("servoj_speed_tolerance", "x"),
+        ] {
+            let e = FaultCommand::parse(name, value).unwrap_err();
+            assert!(e.contains(name), "{e}");
+        }
+        for fault in strict() {
+            let text = fault.to_string();
+            assert!(!text.is_empty());
+        }
+    }
+
+    /// Jitter, outliers, dropped and late frames: the same seed draws the same sequence, and
+    /// the shares and spread are the ones asked for.
+    #[test]
+    fn jitter_outliers_and_frame_fates_are_drawn_reproducibly_from_the_seed() {
+        use rand::SeedableRng;
+        let settings = FaultSettings {
+            latency_ms: 10.0,
+            latency_jitter_ms: 4.0,
+            latency_outliers: Some(Occasional {
+                probability: 0.02,
+                ms: 100.0,
+            }),
+            drop_frames: 0.05,
+            late_frames: Some(Occasional {
+                probability: 0.1,
+                ms: 20.0,
+            }),
+            ..FaultSettings::default()
+        };
+        let draw = |seed: u64| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let latencies: Vec<f64> = (0..20_000)
+                .map(|_| settings.draw_latency_ms(&mut rng))
+                .collect();
+            let fates: Vec<FrameFate> = (0..20_000)
+                .map(|_| settings.draw_frame_fate(&mut rng))
+                .collect();
+            (latencies, fates)
+        };
+        let (latencies, fates) = draw(7);
+        assert_eq!((latencies.clone(), fates.clone()), draw(7));
+        assert_ne!(latencies, draw(8).0);
+        let n = latencies.len() as f64;
+        assert!(latencies.iter().all(|&l| l >= 10.0));
+        let outliers = latencies.iter().filter(|&&l| l >= 100.0).count() as f64 / n;
+        assert!((outliers - 0.02).abs() < 0.005, "{outliers}");
+        // Half-normal jitter: mean σ√(2/π) ≈ 3.19 ms.
+        let usual: Vec<f64> = latencies.iter().copied().filter(|&l| l < 100.0).collect();
+        let mean = usual.iter().sum::<f64>() / usual.len() as f64 - 10.0;
+        assert!(
+            (mean - 4.0 * (2.0 / std::f64::consts::PI).sqrt()).abs() < 0.1,
+            "{mean}"
+        );
+        let dropped = fates.iter().filter(|f| **f == FrameFate::Drop).count() as f64 / n;
+        let late = fates
+            .iter()
+            .filter(|f| **f == FrameFate::Late(Duration::from_millis(20)))
+            .count() as f64
+            / n;
+        assert!((dropped - 0.05).abs() < 0.01, "{dropped}");
+        assert!((late - 0.095).abs() < 0.01, "{late}");
+        // Nothing set: no draw changes anything.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let calm = FaultSettings::default();
+        assert_eq!(calm.draw_latency_ms(&mut rng), 0.0);
+        assert_eq!(calm.draw_frame_fate(&mut rng), FrameFate::Send);
     }
 
     #[test]

@@ -28,6 +28,8 @@
 //!   once it ends, by a reset, if anything was commanded to move in it).
 //! - `TwinInjectFault(name, value)` → `0` (or `4` and a message in the log for a bad fault):
 //!   see [`faults`].
+//! - `TwinTracking()` → `[0, delay_ms, tau_ms, …]`: the drives' tracking in force, j1 to j6
+//!   (see [`faults`]).
 
 pub mod call_log;
 pub mod controller;
@@ -45,7 +47,7 @@ pub mod world;
 mod controller_tests;
 
 use crate::error::{DeployError, Result};
-use crate::fairino::cnde::{CndeControl, CndeServer, StateSource};
+use crate::fairino::cnde::{CndeControl, CndeServer, FrameFate, FrameFates, StateSource};
 use crate::fairino::xmlrpc::XmlRpcServer;
 use crate::pose_source::PoseMessage;
 use crate::robot::RobotState;
@@ -155,6 +157,10 @@ pub(crate) struct Shared {
     pub(crate) world: Mutex<World>,
     pub(crate) faults: Mutex<FaultSettings>,
     rng: Mutex<ChaCha8Rng>,
+    /// Draws of reply latencies and of the stream's frame fates, each its own stream so one
+    /// does not shift the other.
+    latency_rng: Mutex<ChaCha8Rng>,
+    frame_rng: Mutex<ChaCha8Rng>,
     chain: SerialChain,
     history: Mutex<VecDeque<(f64, RobotState)>>,
     object: Mutex<Option<(f64, Isometry3<f64>)>>,
@@ -262,6 +268,16 @@ impl Shared {
             }
             FaultCommand::Estop(on) => self.controller().set_estop(now, *on),
             FaultCommand::SafetyStop(s) => self.controller().set_safety_stop(now, *s),
+            FaultCommand::LatencyJitterMs(v) => settings().latency_jitter_ms = *v,
+            FaultCommand::LatencyOutliers(o) => settings().latency_outliers = *o,
+            FaultCommand::DropFrames(p) => settings().drop_frames = *p,
+            FaultCommand::LateFrames(o) => settings().late_frames = *o,
+            FaultCommand::Tracking(m) => self.controller().set_tracking(*m),
+            FaultCommand::FollowingErrorDeg(v) => self.controller().set_following_error(*v),
+            FaultCommand::ServojSpeedTolerance(v) => {
+                self.controller().set_servo_speed_tolerance(*v)
+            }
+            FaultCommand::BrakeDecelDegS2(v) => self.controller().set_brake_decel(*v),
             FaultCommand::Clear => {
                 *settings() = FaultSettings::default();
                 self.cnde.set_stalled(false);
@@ -269,9 +285,27 @@ impl Shared {
                 c.set_estop(now, false);
                 c.set_safety_stop(now, [false; 2]);
                 c.set_fault(now, 0, 0, true);
+                c.restore_drive_defaults();
             }
         }
         tracing::info!("twin fault: {fault}");
+    }
+
+    /// One reply's latency (s), drawn from the faults in force.
+    pub(crate) fn draw_latency(&self) -> f64 {
+        let faults = self.faults.lock().expect("faults lock").clone();
+        let mut rng = self.latency_rng.lock().expect("rng lock");
+        faults.draw_latency_ms(&mut *rng) / 1000.0
+    }
+
+    /// What happens to the next CNDE frame due.
+    fn frame_fate(&self) -> FrameFate {
+        let faults = self.faults.lock().expect("faults lock").clone();
+        if faults.drop_frames == 0.0 && faults.late_frames.is_none() {
+            return FrameFate::Send;
+        }
+        let mut rng = self.frame_rng.lock().expect("rng lock");
+        faults.draw_frame_fate(&mut *rng)
     }
 
     pub(crate) fn controller(&self) -> std::sync::MutexGuard<'_, Controller> {
@@ -349,6 +383,8 @@ impl Twin {
             world: Mutex::new(world),
             faults: Mutex::new(FaultSettings::default()),
             rng: Mutex::new(ChaCha8Rng::seed_from_u64(config.seed ^ 0x7717_7717)),
+            latency_rng: Mutex::new(ChaCha8Rng::seed_from_u64(config.seed ^ 0x1a7e_0c1e)),
+            frame_rng: Mutex::new(ChaCha8Rng::seed_from_u64(config.seed ^ 0xf4a3_e5ed)),
             chain,
             history: Mutex::new(VecDeque::new()),
             object: Mutex::new(None),
@@ -364,6 +400,15 @@ impl Twin {
         shared.record_state(0.0, initial, object);
         for fault in &config.faults {
             shared.apply(fault);
+        }
+        {
+            // Weak: the stream's control is part of `shared`, a strong link would keep it alive.
+            let weak = Arc::downgrade(&shared);
+            let fates: FrameFates = Arc::new(move || {
+                weak.upgrade()
+                    .map_or(FrameFate::Send, |shared| shared.frame_fate())
+            });
+            shared.cnde.set_fates(Some(fates));
         }
 
         let rpc_addr = SocketAddr::new(config.bind, config.rpc_port);
@@ -464,6 +509,11 @@ impl TwinHandle {
     pub fn inject_text(&self, name: &str, value: &str) -> std::result::Result<(), String> {
         self.inject(FaultCommand::parse(name, value)?);
         Ok(())
+    }
+
+    /// How the drives follow their set points now (what a system identification should find).
+    pub fn tracking(&self) -> faults::TrackingModel {
+        self.shared.controller().tracking()
     }
 
     /// The lasting faults in force.

@@ -1,5 +1,9 @@
-//! Joint-space motion of the twin's controller: the point-to-point profile of `MoveJ` and the
-//! set-point interpolation of a `ServoJ` stream. Degrees and seconds throughout.
+//! Joint-space motion of the twin's controller: the point-to-point profile of `MoveJ`, the
+//! set-point interpolation of a `ServoJ` stream, the braking of a stopped motion and the
+//! drives' tracking of their set points. Degrees and seconds throughout.
+
+use super::faults::TrackingModel;
+use std::collections::VecDeque;
 
 /// Six joint values (deg, deg/s or deg/s²).
 pub type Joints = [f64; 6];
@@ -76,6 +80,126 @@ impl ServoStep {
 
     pub fn finished(&self, t: f64) -> bool {
         t >= self.start + self.duration
+    }
+}
+
+/// A stopped motion's set point braking to rest: every joint decelerates uniformly from its
+/// speed, all reaching zero together (so the set point stays on the line it was moving along).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Brake {
+    pub from: Joints,
+    pub speed: Joints,
+    pub start: f64,
+    pub duration: f64,
+}
+
+impl Brake {
+    /// Braking from `from` at speed `speed`, the fastest joint at `decel`; `None` when
+    /// already at rest.
+    pub fn new(from: Joints, speed: Joints, start: f64, decel: f64) -> Option<Self> {
+        let fastest = speed.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let duration = fastest / decel;
+        (duration > 1e-9 && duration.is_finite()).then_some(Self {
+            from,
+            speed,
+            start,
+            duration,
+        })
+    }
+
+    pub fn at(&self, t: f64) -> Joints {
+        let s = (t - self.start).clamp(0.0, self.duration);
+        let k = s - s * s / (2.0 * self.duration);
+        std::array::from_fn(|j| self.from[j] + self.speed[j] * k)
+    }
+
+    /// Where the set point comes to rest.
+    pub fn end_point(&self) -> Joints {
+        self.at(self.start + self.duration)
+    }
+
+    pub fn finished(&self, t: f64) -> bool {
+        t >= self.start + self.duration
+    }
+}
+
+/// History kept beyond the longest delay (s).
+const DRIVE_HISTORY_MARGIN: f64 = 0.05;
+
+/// The drives between the controller's set point and the joints: each joint's set point
+/// arrives after a pure delay and is followed through a first-order lag.
+#[derive(Clone, Debug)]
+pub struct Drives {
+    /// The controller's set points by time, for the delay.
+    history: VecDeque<(f64, Joints)>,
+    output: Joints,
+    time: f64,
+}
+
+impl Drives {
+    /// Drives at rest at `q` at time `now`.
+    pub fn new(q: Joints, now: f64) -> Self {
+        Self {
+            history: VecDeque::from([(now, q)]),
+            output: q,
+            time: now,
+        }
+    }
+
+    /// The drives' set points at `now`, given the controller's set point `command` at `at`.
+    pub fn follow(&mut self, model: &TrackingModel, at: f64, command: Joints, now: f64) -> Joints {
+        if self.history.back().is_none_or(|(t, _)| at > *t) {
+            self.history.push_back((at, command));
+        }
+        if *model == TrackingModel::default() {
+            self.history.clear();
+            self.history.push_back((at, command));
+            self.output = command;
+            self.time = self.time.max(now);
+            return command;
+        }
+        let dt = now - self.time;
+        if dt > 0.0 {
+            for (j, drive) in model.iter().enumerate() {
+                let delay = drive.delay_ms / 1e3;
+                let u0 = self.at(self.time - delay)[j];
+                let u1 = self.at(now - delay)[j];
+                let tau = drive.tau_ms / 1e3;
+                // Exact over the step for an input linear between its ends.
+                self.output[j] = if tau > 0.0 {
+                    let slope = (u1 - u0) / dt;
+                    let decay = (-dt / tau).exp();
+                    u1 - slope * tau + (self.output[j] - u0 + slope * tau) * decay
+                } else {
+                    u1
+                };
+            }
+            self.time = now;
+            let longest = model.iter().fold(0.0_f64, |m, t| m.max(t.delay_ms / 1e3));
+            let keep_from = now - longest - DRIVE_HISTORY_MARGIN;
+            while self.history.len() > 2 && self.history[1].0 < keep_from {
+                self.history.pop_front();
+            }
+        }
+        self.output
+    }
+
+    /// The controller's set point at time `t`, linear between the ones recorded.
+    fn at(&self, t: f64) -> Joints {
+        let Some(&(first_t, first)) = self.history.front() else {
+            return self.output;
+        };
+        if t <= first_t {
+            return first;
+        }
+        for pair in self.history.iter().zip(self.history.iter().skip(1)) {
+            let ((t0, q0), (t1, q1)) = pair;
+            if t <= *t1 {
+                let s = (t - t0) / (t1 - t0);
+                return std::array::from_fn(|j| q0[j] + (q1[j] - q0[j]) * s);
+            }
+        }
+        self.history.back().map_or(self.output, |(_, q)| *q)
     }
 }
 

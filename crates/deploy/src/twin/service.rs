@@ -318,6 +318,15 @@ impl TwinService {
                     Value::Int(t.successes as i32),
                 ]))
             }
+            "TwinTracking" => {
+                let model = shared.controller().tracking();
+                let mut items = vec![Value::Int(codes::OK)];
+                for t in model {
+                    items.push(Value::Double(t.delay_ms));
+                    items.push(Value::Double(t.tau_ms));
+                }
+                Ok(Value::Array(items))
+            }
             "TwinInjectFault" => run(&|| {
                 a.count(2)?;
                 let name = a.text(0)?;
@@ -394,9 +403,14 @@ impl TwinService {
         if method.starts_with("Twin") {
             return (0.0, 0.0);
         }
-        let mut faults = self.shared.faults.lock().expect("faults lock");
-        let half = faults.latency_ms / 2000.0;
-        let slow = faults.take_slow_delay(method) / 1000.0;
+        let half = self.shared.draw_latency() / 2.0;
+        let slow = self
+            .shared
+            .faults
+            .lock()
+            .expect("faults lock")
+            .take_slow_delay(method)
+            / 1000.0;
         (half, half + slow)
     }
 }

@@ -16,5 +16,5 @@ pub mod state;
 pub use client::CndeClient;
 pub use fields::{DEFAULT_PERIOD_MS, DEFAULT_STATE_NAMES, default_state_names};
 pub use frame::{Frame, FrameDecoder, FrameType};
-pub use server::{CndeControl, CndeServer, StateSource};
+pub use server::{CndeControl, CndeServer, FrameFate, FrameFates, StateSource};
 pub use state::{decode_state, encode_state};

@@ -20,18 +20,45 @@ use std::time::{Duration, Instant};
 /// Where the server gets the state to send: called once per DATA frame per connection.
 pub type StateSource = Arc<dyn Fn() -> RobotState + Send + Sync>;
 
+/// What happens to one DATA frame that is due (fault injection).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FrameFate {
+    Send,
+    /// Left out: the next frame comes a period later.
+    Drop,
+    /// The state of when it was due, sent this much later; the period restarts after it.
+    Late(Duration),
+}
+
+/// Decides each due frame's fate (called once per due frame per connection).
+pub type FrameFates = Arc<dyn Fn() -> FrameFate + Send + Sync>;
+
+/// The longest a late frame is held.
+const MAX_LATE: Duration = Duration::from_secs(1);
+
 /// How long an idle connection thread sleeps before looking at its flags again.
 const IDLE_POLL: Duration = Duration::from_millis(10);
 /// A client whose receive buffer stays full this long is dropped.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Fault injection and bookkeeping shared by the server and whoever drives it.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct CndeControl {
     /// While set, connections stay open and answer requests but send no DATA frames.
     pub stalled: AtomicBool,
     reset_epoch: AtomicU64,
     live: AtomicUsize,
+    fates: Mutex<Option<FrameFates>>,
+}
+
+impl std::fmt::Debug for CndeControl {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CndeControl")
+            .field("stalled", &self.stalled)
+            .field("reset_epoch", &self.reset_epoch)
+            .field("live", &self.live)
+            .finish_non_exhaustive()
+    }
 }
 
 impl CndeControl {
@@ -49,6 +76,17 @@ impl CndeControl {
     /// each notices within a period or 10 ms. Later connections are not affected.
     pub fn reset_all(&self) {
         self.reset_epoch.fetch_add(1, Ordering::SeqCst);
+    }
+
+    /// Lets `fates` decide whether each due frame is sent, dropped or held (`None`: every
+    /// frame is sent on time).
+    pub fn set_fates(&self, fates: Option<FrameFates>) {
+        *self.fates.lock().unwrap_or_else(|p| p.into_inner()) = fates;
+    }
+
+    fn fate(&self) -> FrameFate {
+        let fates = self.fates.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        fates.map_or(FrameFate::Send, |f| f())
     }
 
     /// Connections open now.
@@ -220,12 +258,23 @@ impl Connection {
             let now = Instant::now();
             if let Some(output) = session.due(now) {
                 if !self.control.stalled.load(Ordering::SeqCst) {
+                    let fate = self.control.fate();
+                    if fate == FrameFate::Drop {
+                        continue;
+                    }
                     let payload = encode_state_with(&output.layout, &(self.source)());
                     let frame = Frame::new(count, FrameType::OutputData, payload);
+                    if let FrameFate::Late(delay) = fate {
+                        std::thread::sleep(delay.min(MAX_LATE));
+                    }
                     if self.send(&frame).is_err() {
                         return End::Close;
                     }
                     count = count.wrapping_add(1);
+                    if matches!(fate, FrameFate::Late(_)) {
+                        // Frames sent back to back would reach the SDK as one recv.
+                        session.restart_period(Instant::now());
+                    }
                 }
                 continue;
             }
@@ -285,6 +334,13 @@ impl Session {
             *next_due = now + output.period;
         }
         Some(output)
+    }
+
+    /// The next frame is due a whole period from `now`, if it was due sooner.
+    fn restart_period(&mut self, now: Instant) {
+        if let (Some(output), Some(next_due)) = (&self.config, self.next_due.as_mut()) {
+            *next_due = (*next_due).max(now + output.period);
+        }
     }
 
     /// How long until something is due.
