@@ -37,3 +37,69 @@ pub fn shared_host_safety(speed_scale: f64) -> fairgrasp_deploy::safety::SafetyC
         ..fairgrasp_deploy::safety::SafetyConfig::default()
     }
 }
+
+/// Joint speeds under this (deg/s) count as rest: about 1 % of the FR5's top joint speed.
+#[allow(dead_code)]
+pub const REST_DEG_S: f64 = 2.0;
+
+/// How long the twin's joints take, once the controller's braking has ended, to settle under
+/// [`REST_DEG_S`]: they are the training simulator's PD joints, which lag their set points
+/// with a time constant near 60 ms (measured: 95 ms after a stop from 9 deg/s streaming,
+/// 90 ms after one from the MoveJ home at scale 0.25).
+#[allow(dead_code)]
+pub const DRIVE_SETTLE_S: f64 = 0.15;
+
+/// Watches the twin's reported joint speeds from now until every one is under
+/// [`REST_DEG_S`]: returns the fastest joint speed seen meanwhile (deg/s) and the controller
+/// time (s, the twin's clock) of the first report at rest.
+#[allow(dead_code)]
+pub fn until_rest(twin: &TwinHandle) -> (f64, f64) {
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    let mut fastest = 0.0_f64;
+    loop {
+        let state = twin.state();
+        let top = (state.joint_speeds_deg.iter()).fold(0.0_f64, |m, v| m.max(v.abs()));
+        fastest = fastest.max(top);
+        if top < REST_DEG_S {
+            let clock = state
+                .controller_clock_ms
+                .expect("the twin stamps its state");
+            return (fastest, clock as f64 / 1e3);
+        }
+        assert!(
+            std::time::Instant::now() < until,
+            "the arm never came to rest"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
+/// Checks a stop from the twin's own records: StopMotion reached it within `deadline_s` of
+/// `from` (the twin's clock), and the arm then came to rest within its braking time from the
+/// fastest speed seen (at the twin's braking deceleration) plus [`DRIVE_SETTLE_S`].
+#[allow(dead_code)]
+pub fn check_came_to_rest(twin: &TwinHandle, from: f64, deadline_s: f64, fastest: f64, rest: f64) {
+    let calls = twin.calls();
+    let stop = (calls.iter())
+        .find(|c| c.method == "StopMotion" && c.t >= from)
+        .expect("StopMotion reached the twin");
+    assert!(
+        stop.t - from < deadline_s,
+        "StopMotion reached the twin {:.0} ms after the cause",
+        (stop.t - from) * 1e3
+    );
+    let decel = twin.with_controller(|c| c.config().brake_decel_deg_s2);
+    let allowed = fastest / decel + DRIVE_SETTLE_S;
+    eprintln!(
+        "StopMotion {:.1} ms after the cause; at rest {:.1} ms later, from {fastest:.1} deg/s",
+        (stop.t - from) * 1e3,
+        (rest - stop.t) * 1e3
+    );
+    assert!(
+        rest - stop.t < allowed,
+        "at rest {:.0} ms after StopMotion; braking from {fastest:.1} deg/s and settling \
+         allow {:.0} ms",
+        (rest - stop.t) * 1e3,
+        allowed * 1e3
+    );
+}
