@@ -15,6 +15,7 @@ mod inspect;
 mod plot_cmd;
 mod record_cmd;
 mod robustness_cmd;
+mod sysid_cmd;
 mod train_cmd;
 mod twin_cmd;
 mod view;
@@ -66,6 +67,9 @@ enum Command {
     Calibrate(commission_cmd::CalibrateArgs),
     /// Move each joint a few degrees and back, the operator confirming each direction.
     JogTest(commission_cmd::JogArgs),
+    /// Identify the arm's drives (delay and lag per joint, the gripper's close time) with small,
+    /// slow moves through the safety layer; write the file the twin reads (dry run unless --live).
+    Sysid(sysid_cmd::SysidArgs),
     /// Measure simulator throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -172,6 +176,7 @@ fn main() -> std::process::ExitCode {
         Command::Deploy(args) => deploy_cmd::run(&args),
         Command::Calibrate(args) => commission_cmd::calibrate(&args),
         Command::JogTest(args) => commission_cmd::jog(&args),
+        Command::Sysid(args) => sysid_cmd::run(&args),
         Command::Twin(args) => twin_cmd::run(&args),
         Command::View(args) => view::run(&args),
     };

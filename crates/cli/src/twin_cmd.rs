@@ -67,6 +67,10 @@ pub struct TwinArgs {
     /// CNDE frame in 100 lost and one in 100 held 20 ms. `--fault` flags given too apply after.
     #[arg(long)]
     pub strict: bool,
+    /// The drives' delay and lag from a `fairgrasp sysid` file: the twin's arm then follows
+    /// its set points as the identified arm does. Applies after --strict; --fault after it.
+    #[arg(long, value_name = "SYSID.toml")]
+    pub drives: Option<PathBuf>,
     /// Seed of the first cube placement and of the injected noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -136,6 +140,10 @@ fn faults(args: &TwinArgs) -> Result<Vec<FaultCommand>> {
     } else {
         Vec::new()
     };
+    if let Some(path) = &args.drives {
+        let model = fairgrasp_deploy::sysid::DriveModel::load(path)?;
+        faults.push(FaultCommand::Tracking(model.tracking()));
+    }
     if args.latency_ms != 0.0 {
         faults.push(
             FaultCommand::parse("latency_ms", &args.latency_ms.to_string())
@@ -322,5 +330,30 @@ mod tests {
                 .any(|f| matches!(f, FaultCommand::Tracking(m) if m[0].tau_ms > 0.0))
         );
         assert!(faults(&args(&[])).unwrap().is_empty());
+    }
+
+    #[test]
+    fn drives_come_from_a_sysid_file_and_a_bad_one_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sysid.toml");
+        std::fs::write(
+            &path,
+            "env = \"FaArmGrasp-v0\"\n[[joints]]\njoint = 2\ndelay_ms = 12.0\ntau_ms = 30.0\n\
+             rms_residual_deg = 0.01\nsamples = 900\n",
+        )
+        .unwrap();
+        let p = path.to_str().unwrap();
+        let f = faults(&args(&["--strict", "--drives", p])).unwrap();
+        let Some(FaultCommand::Tracking(m)) = f.last() else {
+            panic!("{f:?}")
+        };
+        assert_eq!((m[1].delay_ms, m[1].tau_ms), (12.0, 30.0));
+        assert_eq!(
+            m[0].tau_ms, 0.0,
+            "joints not identified have no extra drive"
+        );
+        std::fs::write(&path, "env = \"x\"\n[[joints]]\njoint = 9\n").unwrap();
+        let e = faults(&args(&["--drives", p])).unwrap_err();
+        assert!(format!("{e:#}").contains("sysid.toml"), "{e:#}");
     }
 }

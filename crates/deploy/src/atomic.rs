@@ -29,3 +29,55 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         DeployError::config(path.display().to_string(), format!("cannot write: {e}"))
     })
 }
+
+/// As [`write`], but never replaces a file: the complete temporary file is hard-linked to
+/// `path`, which fails if anything is there by then (no window between a check and the write).
+pub fn write_new(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| DeployError::config(path.display().to_string(), "not a file path"))?;
+    let tmp = dir.join(format!(
+        ".{}.new{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::hard_link(&tmp, path)
+    })();
+    let _ = std::fs::remove_file(&tmp);
+    result.map_err(|e| {
+        let message = if e.kind() == std::io::ErrorKind::AlreadyExists {
+            "exists already; it is kept (give another path, or move it away)".to_string()
+        } else {
+            format!("cannot write: {e}")
+        };
+        DeployError::config(path.display().to_string(), message)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn write_new_never_replaces() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.toml");
+        write_new(&path, b"one").unwrap();
+        let e = write_new(&path, b"two").unwrap_err().to_string();
+        assert!(e.contains("exists already"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), b"one");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "no temporary left"
+        );
+    }
+}

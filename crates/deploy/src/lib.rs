@@ -24,6 +24,7 @@ pub mod robot;
 pub mod robustness;
 pub mod runner;
 pub mod safety;
+pub mod sysid;
 pub mod twin;
 
 pub use robot::{RobotCommand, RobotLink, RobotState, StampedState};

@@ -137,6 +137,19 @@ impl World {
         Ok(())
     }
 
+    /// Puts the arm at rest at `joints_deg` with its targets there (the drives' integral
+    /// action forgotten), the gripper untouched: a replay's start.
+    pub fn place_arm(&mut self, joints_deg: &[f64; 6]) -> Result<()> {
+        let q: Vec<f32> = joints_deg.iter().map(|v| v.to_radians() as f32).collect();
+        let scene = self.inner.scene_mut();
+        let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
+        scene.set_arm_positions(&q).map_err(sim)?;
+        scene.set_arm_targets(&q).map_err(sim)?;
+        self.drive_bias = [0.0; 6];
+        self.last_setpoint = None;
+        Ok(())
+    }
+
     /// The episode so far.
     pub fn episode(&self) -> &EpisodeResult {
         &self.episode

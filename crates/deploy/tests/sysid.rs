@@ -1,0 +1,162 @@
+//! `fairgrasp sysid` on the twin: the drives injected into the twin's controller are what the
+//! identification finds, none when none are injected, and a dry run moves nothing.
+
+mod common;
+
+use common::{shared_host_safety, twin_client};
+use fairgrasp_deploy::calibration::Calibration;
+use fairgrasp_deploy::runner::ModelIo;
+use fairgrasp_deploy::safety::{SafetyFilter, Watchdog};
+use fairgrasp_deploy::sysid::{
+    ArmSim, DriveModel, ExcitationPlan, RecordOptions, Recording, identify, record,
+};
+use fairgrasp_deploy::twin::controller::StartState;
+use fairgrasp_deploy::twin::faults::FaultCommand;
+use fairgrasp_deploy::twin::{Twin, TwinConfig, TwinHandle};
+use std::sync::Mutex;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+/// One real-time twin at a time: two on a shared host would slow each other's physics.
+static ONE_TWIN: Mutex<()> = Mutex::new(());
+
+fn twin(faults: Vec<FaultCommand>) -> TwinHandle {
+    Twin::spawn(TwinConfig {
+        faults,
+        start: StartState {
+            gripper_active: true,
+            ..StartState::default()
+        },
+        ..TwinConfig::ephemeral()
+    })
+    .unwrap()
+}
+
+/// Runs the excitation of `joints` on `twin` (live or not) through the safety layer.
+fn run(twin: &TwinHandle, joints: &[usize], live: bool, gripper: bool) -> Option<Recording> {
+    let mut client = twin_client(twin);
+    let io = ModelIo::for_config(fairgrasp_env::GraspConfig::default()).unwrap();
+    let calibration = Calibration::identity(&io.limits_rad);
+    let safety = shared_host_safety(1.0);
+    let mut filter = SafetyFilter::new(
+        &safety,
+        &calibration.soft_limits(),
+        io.nominal.table_z * 1000.0,
+        io.arm_kinematics(&calibration),
+    )
+    .unwrap();
+    let watchdog = Watchdog::new(
+        Duration::from_secs_f64(safety.state_deadline_ms / 1000.0),
+        fairgrasp_deploy::fairino::error_code_meaning,
+    );
+    let (speed, acc, _) = filter.caps();
+    let plan = ExcitationPlan::new(joints, 3.0, speed, acc).unwrap();
+    // The arm settles at home first (the twin starts with the joints sagging).
+    std::thread::sleep(Duration::from_millis(500));
+    record(
+        &mut client,
+        &mut filter,
+        &watchdog,
+        &plan,
+        &RecordOptions {
+            live,
+            gripper_speed_percent: gripper.then_some(50),
+            gripper_index: 1,
+        },
+        &AtomicBool::new(false),
+    )
+    .unwrap()
+}
+
+fn identified(twin: &TwinHandle, joints: &[usize], gripper: bool) -> DriveModel {
+    let recording = run(twin, joints, true, gripper).expect("a live run records");
+    let started = std::time::Instant::now();
+    let model = identify(&recording, &ArmSim::new(twin.env_id())).unwrap();
+    eprintln!(
+        "identified in {:.1} s from {} set points and {} states:\n{}",
+        started.elapsed().as_secs_f64(),
+        recording.commands.len(),
+        recording.states.len(),
+        model.to_toml().unwrap()
+    );
+    assert_eq!(
+        twin.overruns(),
+        0,
+        "the twin's physics fell behind real time"
+    );
+    model
+}
+
+#[test]
+fn injected_drives_are_recovered_within_ten_percent() {
+    let _one = ONE_TWIN.lock().unwrap_or_else(|e| e.into_inner());
+    // Joint 1: 12 ms and 30 ms; joint 3: 6 ms and 45 ms; the others none.
+    let injected = FaultCommand::parse("tracking", "12,30,0,0,6,45,0,0,0,0,0,0").unwrap();
+    let twin = twin(vec![injected]);
+    let truth = twin.tracking();
+    let model = identified(&twin, &[1, 3], true);
+    assert_eq!(model.joints.len(), 2);
+    for j in &model.joints {
+        let want = truth[j.joint - 1];
+        eprintln!(
+            "joint {}: injected {} ms / {} ms, identified {:.2} ms / {:.2} ms, rms {:.4} deg",
+            j.joint, want.delay_ms, want.tau_ms, j.delay_ms, j.tau_ms, j.rms_residual_deg
+        );
+        assert!(
+            (j.delay_ms - want.delay_ms).abs() <= 0.1 * want.delay_ms,
+            "joint {}: delay {} ms, injected {} ms",
+            j.joint,
+            j.delay_ms,
+            want.delay_ms
+        );
+        assert!(
+            (j.tau_ms - want.tau_ms).abs() <= 0.1 * want.tau_ms,
+            "joint {}: lag {} ms, injected {} ms",
+            j.joint,
+            j.tau_ms,
+            want.tau_ms
+        );
+    }
+    // The gripper closed on nothing, all the way, and was left open.
+    let g = model.gripper.expect("the gripper was timed");
+    assert!(!g.stalled && g.final_position_percent < 3.0, "{g:?}");
+    assert!(g.close_time_s > 0.0 && g.close_time_s < 3.0, "{g:?}");
+    assert!(twin.state().gripper_position > 95);
+    // The model the twin reads back is what was found.
+    let t = model.tracking();
+    assert_eq!(t[0].delay_ms, model.joints[0].delay_ms);
+}
+
+#[test]
+fn without_injected_drives_nothing_extra_is_found() {
+    let _one = ONE_TWIN.lock().unwrap_or_else(|e| e.into_inner());
+    let twin = twin(Vec::new());
+    let model = identified(&twin, &[2], false);
+    let j = &model.joints[0];
+    eprintln!(
+        "joint 2 with no drives injected: {:.2} ms / {:.2} ms, rms {:.4} deg",
+        j.delay_ms, j.tau_ms, j.rms_residual_deg
+    );
+    assert!(j.delay_ms < 2.0 && j.tau_ms < 2.0, "{j:?}");
+    assert!(model.gripper.is_none());
+}
+
+#[test]
+fn a_dry_run_sends_no_motion_command() {
+    let _one = ONE_TWIN.lock().unwrap_or_else(|e| e.into_inner());
+    let twin = twin(Vec::new());
+    twin.clear_calls();
+    assert!(run(&twin, &[1, 2, 3, 4, 5, 6], false, true).is_none());
+    let calls = twin.calls();
+    let moving: Vec<_> = calls
+        .iter()
+        .filter(|c| {
+            !matches!(
+                c.method.as_str(),
+                "GetControllerIP" | "TwinInfo" | "GetActualJointPosDegree"
+            )
+        })
+        .map(|c| c.method.clone())
+        .collect();
+    assert!(moving.is_empty(), "a dry run sent {moving:?}");
+}
