@@ -6,7 +6,7 @@ use fairgrasp_deploy::calibration::Calibration;
 use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
 use fairgrasp_deploy::pose_source::{FixedPose, PoseSource, StreamedPose, parse_fixed_pose};
 use fairgrasp_deploy::runner::{
-    DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo, OperatorHost, TwinHost,
+    AfterSuccess, DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo, OperatorHost, TwinHost,
 };
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_rl::policies::Policy;
@@ -79,6 +79,11 @@ pub struct DeployArgs {
     /// did in training.
     #[arg(long)]
     pub full_episodes: bool,
+    /// Once the success rule has held: `put-down` lowers the object back to where the gripper
+    /// closed on it, opens and withdraws; `hold` keeps the gripper closed (take the object
+    /// out before confirming the next episode, whose start opens the gripper at home).
+    #[arg(long, value_enum, default_value_t = AfterSuccessArg::PutDown)]
+    pub after_success: AfterSuccessArg,
     /// Global speed scale in (0, 1] (overrides the safety file's; 0.25 by default): the
     /// policy's motion slowed in time, like a teach pendant's speed slider.
     #[arg(long)]
@@ -110,6 +115,21 @@ pub struct DeployArgs {
     /// First episode seed for the twin's object placement (held-out by default).
     #[arg(long, default_value_t = fairgrasp_rl::train::HELD_OUT_SEED_BASE)]
     pub seed: u64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AfterSuccessArg {
+    PutDown,
+    Hold,
+}
+
+impl From<AfterSuccessArg> for AfterSuccess {
+    fn from(arg: AfterSuccessArg) -> Self {
+        match arg {
+            AfterSuccessArg::PutDown => AfterSuccess::PutDown,
+            AfterSuccessArg::Hold => AfterSuccess::Hold,
+        }
+    }
 }
 
 /// Reads a TOML file whose `[safety]` table overrides the defaults.
@@ -195,6 +215,7 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         safety,
         gripper_index: args.gripper_index,
         end_at_success: !args.full_episodes,
+        after_success: args.after_success.into(),
         ..DeployOptions::default()
     };
     let log = JsonLog::create(Some(&args.log))?;

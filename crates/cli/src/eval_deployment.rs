@@ -7,7 +7,7 @@
 use crate::eval_cmd::EvalArgs;
 use anyhow::{Context, Result};
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo};
+use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, Deployment, JsonLog, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
 use fairgrasp_rl::policies::Policy;
@@ -66,6 +66,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                 speed_scale: d.speed_scale,
                 ..SafetyConfig::default()
             },
+            // Judged at success; putting the object down would only add simulated time.
+            after_success: AfterSuccess::Hold,
             ..DeployOptions::default()
         };
         let mut deployment = Deployment::new(

@@ -13,12 +13,14 @@ mod common;
 
 use common::{shared_host_safety, twin_client, twin_client_with};
 use fairgrasp_deploy::pose_source::StreamedPose;
-use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
+use fairgrasp_deploy::runner::{
+    AfterSuccess, DeployOptions, Deployment, JsonLog, ModelIo, TwinHost,
+};
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::{Twin, TwinConfig};
 use fairgrasp_rl::policies::Policy;
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -37,12 +39,17 @@ fn model_dir(name: &str) -> PathBuf {
 fn a_policy_trained_through_the_servo_model_grasps_on_the_twin() {
     // `configs/ppo_deploy.toml`, seed 42 (with [readings]): 39 of 40 at scale 0.5, 38 of 40 at
     // 0.25 and 40 of 40 at 1 on the deployment-matched evaluation.
-    grasps_on_the_twin("deploy_ppo", Servo::XmlRpc);
+    grasps_on_the_twin("deploy_ppo", Servo::XmlRpc, AfterSuccess::PutDown);
 }
 
 #[test]
 fn the_same_policy_grasps_over_the_real_time_udp_servo_path() {
-    grasps_on_the_twin("deploy_ppo", Servo::Udp);
+    grasps_on_the_twin("deploy_ppo", Servo::Udp, AfterSuccess::PutDown);
+}
+
+#[test]
+fn after_success_the_arm_can_hold_the_object_instead() {
+    grasps_on_the_twin("deploy_ppo", Servo::XmlRpc, AfterSuccess::Hold);
 }
 
 /// How the servo commands travel.
@@ -60,13 +67,14 @@ enum Servo {
             [readings] is stopped by the workspace box): open in the transfer issue"]
 fn a_policy_trained_on_the_kinematic_drive_grasps_on_the_pd_twin() {
     // 18 of 20 at speed scale 0.25 with the session-13 loop (docs/simulation.md).
-    grasps_on_the_twin("deploy_ppo_kinematic", Servo::XmlRpc);
+    grasps_on_the_twin("deploy_ppo_kinematic", Servo::XmlRpc, AfterSuccess::PutDown);
 }
 
 /// Three episodes at speed scale 0.5: at least two grasps (one miss is allowed for a loaded
 /// host or the policy's rare failure), episodes ended by the success rule, the gripper at the
-/// speed scale, the servo commands on the path asked for.
-fn grasps_on_the_twin(model: &str, servo: Servo) {
+/// speed scale, the servo commands on the path asked for; after the last grasp the object is
+/// back on the table with the gripper open, or still lifted in the closed gripper.
+fn grasps_on_the_twin(model: &str, servo: Servo, after_success: AfterSuccess) {
     let _turn = TWIN.lock().unwrap_or_else(|e| e.into_inner());
     let faults = ["latency_ms=10", "joint_noise_deg=0.05"]
         .iter()
@@ -90,6 +98,7 @@ fn grasps_on_the_twin(model: &str, servo: Servo) {
         live: true,
         episodes: 3,
         safety: shared_host_safety(0.5),
+        after_success,
         ..DeployOptions::default()
     };
     let mut deployment = Deployment::new(
@@ -115,8 +124,55 @@ fn grasps_on_the_twin(model: &str, servo: Servo) {
         Duration::from_secs(1),
     )
     .unwrap();
-    let report = deployment.run(&mut host, &mut pose).unwrap();
+    let resting_z = twin.object_pose().unwrap().position[2];
+    // The object's height against the twin's clock, to catch a drop.
+    let done = AtomicBool::new(false);
+    let (report, heights) = std::thread::scope(|s| {
+        let runner = s.spawn(|| {
+            let report = deployment.run(&mut host, &mut pose).unwrap();
+            done.store(true, Ordering::Relaxed);
+            report
+        });
+        let mut heights = Vec::new();
+        while !done.load(Ordering::Relaxed) {
+            heights.push((twin.now(), twin.object_pose().unwrap().position[2]));
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        (runner.join().unwrap(), heights)
+    });
     assert!(report.fault.is_none(), "{:?}", report.fault);
+    // Nothing is let fall: a 20 cm drop lands at 2 m/s. (Each episode's reset moves the
+    // object back to the table at once.)
+    let resets: Vec<f64> = (twin.calls().iter())
+        .filter(|c| c.method == "TwinReset")
+        .map(|c| c.t)
+        .collect();
+    let fastest_fall = (heights.windows(10))
+        .filter(|w| {
+            !resets
+                .iter()
+                .any(|t| (w[0].0 - 0.01..=w[9].0 + 0.01).contains(t))
+        })
+        .map(|w| (w[0].1 - w[9].1) / (w[9].0 - w[0].0).max(1e-3))
+        .fold(0.0_f64, f64::max);
+    assert!(
+        fastest_fall < 1.0,
+        "the object fell at {fastest_fall:.2} m/s"
+    );
+    if report.episodes.last().unwrap().ended_at_success {
+        let lift = twin.object_pose().unwrap().position[2] - resting_z;
+        let gripper = twin.state().gripper_position;
+        match after_success {
+            AfterSuccess::PutDown => assert!(
+                lift.abs() < 0.005 && gripper >= 90,
+                "put down: the object {lift} m above its resting height, the gripper at {gripper} %"
+            ),
+            AfterSuccess::Hold => assert!(
+                lift > 0.02 && gripper < 90,
+                "held: the object {lift} m above its resting height, the gripper at {gripper} %"
+            ),
+        }
+    }
     let grasped = report
         .episodes
         .iter()

@@ -5,7 +5,7 @@
 use fairgrasp_deploy::calibration::Calibration;
 mod common;
 
-use common::{shared_host_safety, twin_client};
+use common::{check_rest_after_stop, record_speeds, shared_host_safety, twin_client};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunReport, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
@@ -14,7 +14,7 @@ use fairgrasp_deploy::twin::{Twin, TwinConfig, TwinHandle};
 use fairgrasp_rl::policies::Policy;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 fn model_dir() -> PathBuf {
@@ -22,7 +22,9 @@ fn model_dir() -> PathBuf {
 }
 
 /// Runs the loop against a fresh twin; `fault` (name, value) is injected once the twin has
-/// received `after` ServoJ calls. Returns the report and the twin.
+/// received `after` ServoJ calls. Returns the report and the twin; when the run ended on a
+/// fault, first checks from the twin's joint speeds that the arm came to rest after the stop
+/// ([`common::check_rest_after_stop`]).
 fn run_with(fault: Option<(&str, &str)>, after: usize, episodes: u32) -> (RunReport, TwinHandle) {
     run_on(TwinConfig::ephemeral(), fault, after, episodes)
 }
@@ -62,8 +64,13 @@ fn run_on(
         Duration::from_secs(1),
     )
     .unwrap();
-    let report = std::thread::scope(|s| {
-        let runner = s.spawn(|| deployment.run(&mut host, &mut pose).unwrap());
+    let done = AtomicBool::new(false);
+    let (report, speeds) = std::thread::scope(|s| {
+        let runner = s.spawn(|| {
+            let report = deployment.run(&mut host, &mut pose).unwrap();
+            done.store(true, Ordering::Relaxed);
+            report
+        });
         if let Some((name, value)) = fault {
             let until = Instant::now() + Duration::from_secs(30);
             while servo_calls(&twin) < after {
@@ -72,8 +79,12 @@ fn run_on(
             }
             twin.inject_text(name, value).unwrap();
         }
-        runner.join().unwrap()
+        let speeds = record_speeds(&twin, &done);
+        (runner.join().unwrap(), speeds)
     });
+    if report.fault.is_some() {
+        check_rest_after_stop(&twin, &speeds);
+    }
     (report, twin)
 }
 

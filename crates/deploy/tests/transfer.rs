@@ -16,7 +16,9 @@ mod common;
 use common::{shared_host_safety, twin_client};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::robot::RobotLink;
-use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, TwinHost};
+use fairgrasp_deploy::runner::{
+    AfterSuccess, DeployOptions, Deployment, JsonLog, ModelIo, TwinHost,
+};
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
@@ -64,12 +66,14 @@ fn deployment(
     policy: Policy,
     episodes: u32,
     safety: SafetyConfig,
+    after_success: AfterSuccess,
 ) -> Deployment {
     let io = ModelIo::for_policy(&policy).unwrap();
     let options = DeployOptions {
         live: true,
         episodes,
         safety,
+        after_success,
         ..DeployOptions::default()
     };
     Deployment::new(
@@ -97,7 +101,9 @@ fn deployment_matched(model: &Path, episodes: u32) -> u32 {
         speed_scale: 1.0,
         ..SafetyConfig::default()
     };
-    let mut deployment = deployment(Box::new(link.clone()), policy, episodes, safety);
+    // As `fairgrasp eval --deployment`: judged at success, nothing put down.
+    let after = AfterSuccess::Hold;
+    let mut deployment = deployment(Box::new(link.clone()), policy, episodes, safety, after);
     let report = deployment
         .run(&mut link.host(), &mut link.pose_source())
         .unwrap();
@@ -123,7 +129,9 @@ fn on_the_twin(model: &Path, episodes: u32) -> u32 {
     .unwrap();
     let client = twin_client(&twin);
     let policy = Policy::load(model).unwrap();
-    let mut deployment = deployment(Box::new(client), policy, episodes, shared_host_safety(1.0));
+    let safety = shared_host_safety(1.0);
+    let after = AfterSuccess::PutDown;
+    let mut deployment = deployment(Box::new(client), policy, episodes, safety, after);
     let mut host = TwinHost::detect(&twin.rpc_addr().to_string(), 1)
         .unwrap()
         .expect("the twin says it is one");

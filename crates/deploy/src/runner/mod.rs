@@ -38,6 +38,19 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+/// A set point within this of its target (deg) and slower than [`ARRIVED_DEG_S`] has arrived.
+const ARRIVED_DEG: f64 = 0.05;
+const ARRIVED_DEG_S: f64 = 0.5;
+/// How fast a put-down moves (deg/s for the joint that moves farthest) at speed scale 1: a
+/// fifth of the FR5's top joint speed, gentle enough to set an object down.
+const PUT_DOWN_DEG_S: f64 = 36.0;
+/// The longest a put-down waits at its goal for the set point to arrive at rest.
+const SETTLE_LIMIT: Duration = Duration::from_secs(1);
+/// The gripper counts as open from this position (%); its full stroke is 100.
+const GRIPPER_OPEN_PERCENT: u8 = 90;
+/// The longest the put-down waits for the gripper to open, streaming the same set point.
+const GRIPPER_OPEN_LIMIT: Duration = Duration::from_secs(3);
+
 /// How the loop runs.
 #[derive(Clone, Debug)]
 pub struct DeployOptions {
@@ -61,6 +74,19 @@ pub struct DeployOptions {
     /// estimated state, a judge of the true state (the twin's, an operator's) on its own clock
     /// may count one step later.
     pub hold_after_success: u32,
+    /// What becomes of the object once the success rule has held.
+    pub after_success: AfterSuccess,
+}
+
+/// What the arm does with a grasped object when the episode ends at success.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AfterSuccess {
+    /// Lower it back to where the gripper closed on it, open, and withdraw to the lifted pose.
+    #[default]
+    PutDown,
+    /// Keep the gripper closed: the operator takes the object before the next episode, whose
+    /// start opens the gripper at home.
+    Hold,
 }
 
 impl Default for DeployOptions {
@@ -74,6 +100,7 @@ impl Default for DeployOptions {
             pose_timeout: Duration::from_secs(2),
             end_at_success: true,
             hold_after_success: 5,
+            after_success: AfterSuccess::PutDown,
         }
     }
 }
@@ -397,15 +424,16 @@ impl Deployment {
     }
 
     /// Streams set points towards `target` on the servo schedule until tick `until`: each send
-    /// waits for its tick, checks the state (after the step's first, read just before), and
-    /// carries the filter's set point for every tick due by then.
+    /// waits for its tick, checks the state (but the first when `read` says the caller has
+    /// just read it), and carries the filter's set point for every tick due by then.
     fn stream(
         &mut self,
         clock: &mut ServoClock,
         target: &[f64; 6],
         until: u64,
+        read: bool,
     ) -> std::result::Result<(), Fault> {
-        let mut first = true;
+        let mut first = read;
         while clock.taken() < until {
             self.link.sleep_until(clock.next_due());
             if !first {
@@ -448,6 +476,65 @@ impl Deployment {
         Ok(())
     }
 
+    /// Streams set points along the straight joint line from the last set point to `goal` at
+    /// `speed` (deg/s, the joint that moves farthest), then holds `goal` until the filter's set
+    /// point has arrived there at rest or `settle` has passed.
+    fn stream_to(
+        &mut self,
+        clock: &mut ServoClock,
+        goal: &[f64; 6],
+        speed: f64,
+        settle: Duration,
+    ) -> std::result::Result<(), Fault> {
+        let from = self.filter.last().map_or(*goal, |(at, _)| at);
+        let farthest = (0..6).fold(0.0_f64, |m, j| m.max((goal[j] - from[j]).abs()));
+        let ticks = (farthest / speed / self.tick.as_secs_f64()).ceil() as u64;
+        for k in 1..=ticks {
+            let s = k as f64 / ticks as f64;
+            let target = std::array::from_fn(|j| from[j] + s * (goal[j] - from[j]));
+            let until = clock.taken() + 1;
+            self.stream(clock, &target, until, false)?;
+        }
+        let end = clock.taken() + (settle.as_secs_f64() / self.tick.as_secs_f64()).ceil() as u64;
+        while clock.taken() < end {
+            let until = clock.taken() + 1;
+            self.stream(clock, goal, until, false)?;
+            if let Some((at, speed)) = self.filter.last() {
+                let gap = (0..6).fold(0.0_f64, |m, j| m.max((at[j] - goal[j]).abs()));
+                if gap < ARRIVED_DEG && speed.iter().all(|v| v.abs() < ARRIVED_DEG_S) {
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Lowers a grasped object to where the gripper closed on it, opens the gripper while the
+    /// set points hold the arm there, and withdraws to where the arm held the object: so a
+    /// successful episode ends with the object back on the table, not dropped from the lift.
+    fn put_down(
+        &mut self,
+        clock: &mut ServoClock,
+        down: &[f64; 6],
+    ) -> std::result::Result<(), Fault> {
+        let Some((lifted, _)) = self.filter.last() else {
+            return Ok(());
+        };
+        let speed = PUT_DOWN_DEG_S * self.options.safety.speed_scale;
+        self.stream_to(clock, down, speed, SETTLE_LIMIT)?;
+        self.gripper(true)?;
+        self.link.settle_aside(true)?;
+        let opened = self.link.now() + GRIPPER_OPEN_LIMIT;
+        loop {
+            self.stream_to(clock, down, speed, self.tick)?;
+            let state = self.link.state()?.state;
+            if state.gripper_position >= GRIPPER_OPEN_PERCENT || self.link.now() >= opened {
+                break;
+            }
+        }
+        self.stream_to(clock, &lifted, speed, SETTLE_LIMIT)
+    }
+
     /// One episode from home: returns when its steps are done, or the fault.
     fn episode(
         &mut self,
@@ -480,6 +567,10 @@ impl Deployment {
         let mut ik_failures = 0;
         let mut success = self.io.success_judge();
         let mut acted = steps;
+        let mut succeeded = false;
+        // Where the arm was when the gripper last began to close: where a grasped object
+        // goes back down to.
+        let mut closed_at = None;
         let mut clock = ServoClock::new(self.link.now(), self.tick);
         for step in 0..steps {
             if step > 0 {
@@ -511,10 +602,11 @@ impl Deployment {
                 );
                 if self.options.end_at_success && success.update(&state) {
                     acted = step;
+                    succeeded = true;
                     let target = self.calibration.to_robot(&command.arm_target);
                     for k in 0..self.options.hold_after_success as u64 {
                         let until = (step as u64 + k + 1) * self.servo_ticks as u64;
-                        self.stream(&mut clock, &target, until)?;
+                        self.stream(&mut clock, &target, until, k == 0)?;
                     }
                     break;
                 }
@@ -542,16 +634,27 @@ impl Deployment {
             }
             if closing == command.gripper_open {
                 closing = !command.gripper_open;
+                if closing {
+                    closed_at = Some(self.calibration.to_robot(&command.arm_target));
+                }
                 self.gripper(command.gripper_open)?;
             }
             let target = self.calibration.to_robot(&command.arm_target);
             let until = (step as u64 + 1) * self.servo_ticks as u64;
-            self.stream(&mut clock, &target, until)?;
+            self.stream(&mut clock, &target, until, true)?;
+        }
+        let hold = succeeded && self.options.after_success == AfterSuccess::Hold;
+        if let (true, AfterSuccess::PutDown, Some(down)) =
+            (succeeded, self.options.after_success, closed_at)
+        {
+            self.put_down(&mut clock, &down)?;
         }
         self.come_to_rest(&mut clock)?;
         self.link.settle_aside(true)?;
         self.link.send(&RobotCommand::ServoMoveEnd)?;
-        self.gripper(true)?;
+        if !hold {
+            self.gripper(true)?;
+        }
         Ok(EpisodeReport {
             steps: acted,
             ended_at_success: acted < steps,

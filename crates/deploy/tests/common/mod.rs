@@ -103,3 +103,65 @@ pub fn check_came_to_rest(twin: &TwinHandle, from: f64, deadline_s: f64, fastest
         allowed * 1e3
     );
 }
+
+/// Samples the twin's fastest joint speed (deg/s) against its controller clock (s) every
+/// millisecond until `done`, then for long enough after it for any stop to settle.
+#[allow(dead_code)]
+pub fn record_speeds(twin: &TwinHandle, done: &std::sync::atomic::AtomicBool) -> Vec<(f64, f64)> {
+    let mut trace = Vec::new();
+    let mut after = None;
+    loop {
+        let state = twin.state();
+        let top = (state.joint_speeds_deg.iter()).fold(0.0_f64, |m, v| m.max(v.abs()));
+        let clock = state
+            .controller_clock_ms
+            .expect("the twin stamps its state");
+        trace.push((clock as f64 / 1e3, top));
+        if done.load(std::sync::atomic::Ordering::Relaxed) {
+            let since = *after.get_or_insert_with(std::time::Instant::now);
+            if since.elapsed() > std::time::Duration::from_millis(500) {
+                return trace;
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
+/// Checks from a [`record_speeds`] trace that the arm came to rest after the twin's last
+/// StopMotion within the braking time from the fastest speed seen after it, plus
+/// [`DRIVE_SETTLE_S`]: the first sample from which every later one is under [`REST_DEG_S`].
+#[allow(dead_code)]
+pub fn check_rest_after_stop(twin: &TwinHandle, trace: &[(f64, f64)]) {
+    let calls = twin.calls();
+    let stop = (calls.iter().rev())
+        .find(|c| c.method == "StopMotion")
+        .expect("StopMotion reached the twin")
+        .t;
+    let after: Vec<_> = trace.iter().filter(|(t, _)| *t >= stop).collect();
+    assert!(!after.is_empty(), "no joint speeds recorded after the stop");
+    let fastest = after.iter().fold(0.0_f64, |m, (_, v)| m.max(*v));
+    let moving = after.iter().rposition(|(_, v)| *v >= REST_DEG_S);
+    let rest = match moving {
+        None => stop,
+        Some(i) => {
+            assert!(
+                i + 1 < after.len(),
+                "the arm still moved at the end of the trace"
+            );
+            after[i + 1].0
+        }
+    };
+    let decel = twin.with_controller(|c| c.config().brake_decel_deg_s2);
+    let allowed = fastest / decel + DRIVE_SETTLE_S;
+    eprintln!(
+        "at rest {:.1} ms after StopMotion, from {fastest:.1} deg/s",
+        (rest - stop) * 1e3
+    );
+    assert!(
+        rest - stop < allowed,
+        "at rest {:.0} ms after StopMotion; braking from {fastest:.1} deg/s and settling \
+         allow {:.0} ms",
+        (rest - stop) * 1e3,
+        allowed * 1e3
+    );
+}
