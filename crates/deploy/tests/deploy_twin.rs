@@ -5,7 +5,7 @@
 use fairgrasp_deploy::calibration::Calibration;
 mod common;
 
-use common::{shared_host_safety, twin_client};
+use common::{check_came_to_rest, shared_host_safety, twin_client, until_rest};
 use fairgrasp_deploy::pose_source::StreamedPose;
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunReport, TwinHost};
 use fairgrasp_deploy::safety::SafetyConfig;
@@ -34,6 +34,18 @@ fn run_on(
     after: usize,
     episodes: u32,
 ) -> (RunReport, TwinHandle) {
+    let (report, twin, _) = run_watching(config, fault, after, episodes);
+    (report, twin)
+}
+
+/// The same, and when a fault was injected: the twin's time of the injection, and what
+/// [`until_rest`] saw from then on (the fastest joint speed, the time of rest).
+fn run_watching(
+    config: TwinConfig,
+    fault: Option<(&str, &str)>,
+    after: usize,
+    episodes: u32,
+) -> (RunReport, TwinHandle, Option<(f64, f64, f64)>) {
     let twin = Twin::spawn(config).unwrap();
     let client = twin_client(&twin);
     let policy = Policy::load(&model_dir()).unwrap();
@@ -64,17 +76,22 @@ fn run_on(
     .unwrap();
     let report = std::thread::scope(|s| {
         let runner = s.spawn(|| deployment.run(&mut host, &mut pose).unwrap());
+        let mut watched = None;
         if let Some((name, value)) = fault {
             let until = Instant::now() + Duration::from_secs(30);
             while servo_calls(&twin) < after {
                 assert!(Instant::now() < until, "the loop never streamed");
                 std::thread::sleep(Duration::from_millis(2));
             }
+            let injected = twin.now();
             twin.inject_text(name, value).unwrap();
+            let (fastest, rest) = until_rest(&twin);
+            watched = Some((injected, fastest, rest));
         }
-        runner.join().unwrap()
+        (runner.join().unwrap(), watched)
     });
-    (report, twin)
+    let (report, watched) = report;
+    (report, twin, watched)
 }
 
 fn servo_calls(twin: &TwinHandle) -> usize {
@@ -154,6 +171,22 @@ fn a_following_error_stops_the_arm_and_is_named() {
     );
 }
 
+/// A collision the controller detects (forced here; `collision_level_n` detects real ones):
+/// the loop stops, naming the collision rather than its fault code, and the arm, braked by the
+/// controller at once, is at rest within its braking time of the StopMotion.
+#[test]
+fn a_collision_stops_the_arm_and_is_named() {
+    let (report, twin, watched) =
+        run_watching(TwinConfig::ephemeral(), Some(("collision", "1")), 20, 1);
+    check_stopped(&report, &twin, "collision");
+    let text = report.fault.unwrap().to_string();
+    assert!(text.contains("collision"), "{text}");
+    let (injected, fastest, rest) = watched.unwrap();
+    check_came_to_rest(&twin, injected, 0.1, fastest, rest);
+    let state = twin.state();
+    assert!(state.collision && state.main_code == 201, "{state:?}");
+}
+
 /// On a twin as strict as a real controller (`fairgrasp twin --strict`: lagging drives,
 /// jittering replies, lost and late frames) the fixture policy runs its episodes without a
 /// fault, and the ServoJ rule never refuses the loop's set points.
@@ -174,6 +207,10 @@ fn without_faults_episodes_run_on_a_strict_twin() {
         .count();
     assert_eq!(refused, 0);
     assert_eq!(twin.state().main_code, 0);
+    assert!(
+        !twin.state().collision,
+        "the policy's grasps are not collisions"
+    );
 }
 
 #[test]

@@ -260,8 +260,9 @@ pub struct Controller {
     measured: Measured,
     gripper: Gripper,
     motion_commands: u64,
-    /// `collision_state`: a collision was detected (or forced) and not yet reset.
+    /// `collision_state`: a collision was detected (or forced) and not yet reset, and when.
     collision: bool,
+    collision_at: f64,
     /// Detection waits for the contact force to fall below the level after a collision, so a
     /// reset arm still pressing can be moved clear.
     collision_armed: bool,
@@ -328,6 +329,7 @@ impl Controller {
             gripper: Gripper::new(start.gripper_active),
             motion_commands: 0,
             collision: false,
+            collision_at: 0.0,
             collision_armed: true,
         }
     }
@@ -494,12 +496,13 @@ impl Controller {
         }
         self.raise(now, MAIN_CODE_COLLISION, joint);
         self.collision = true;
+        self.collision_at = now;
         self.collision_armed = false;
     }
 
-    /// Whether `collision_state` is set.
-    pub fn collision(&self) -> bool {
-        self.collision
+    /// When the collision standing now was detected (twin time, s).
+    pub fn collision_since(&self) -> Option<f64> {
+        self.collision.then_some(self.collision_at)
     }
 
     /// Raises a fault (`main` ≠ 0: the arm stops) or clears it (`main` = 0).
