@@ -26,7 +26,7 @@
 //! | `following_error_deg` | deg, `off` | a set point and actual joint further apart than this is a fault: the arm brakes, main_code 200, sub_code the joint (default 20°) |
 //! | `servoj_speed_tolerance` | fraction | a ServoJ step may exceed the joint's top speed by this share before it is refused with 29 (default 0.05) |
 //! | `brake_decel_deg_s2` | deg/s² | how hard the set point brakes when the arm stops (default 720) |
-//! | `collision_level_n` | N, `off` | a net contact force on the robot above this is a collision: `collision_state` 1, main_code 201, sub_code the joint carrying the link that pressed hardest, the arm brakes (default 250; `--strict` 150) |
+//! | `collision_level_n` | N, `off` | a net contact force on the robot above this is a collision: `collision_state` 1, main_code 201, sub_code the joint carrying the link that pressed hardest, the arm brakes (default 400; `--strict` 150) |
 //! | `collision` | 1 / 0 | a collision now (`collision_state` 1, main_code 201, sub_code 0, the arm brakes) / its state and fault cleared |
 //! | `clear` | any | everything above back to normal, faults cleared |
 //!
