@@ -59,12 +59,14 @@ pub struct TwinArgs {
     /// Any other fault from the start, `NAME=VALUE` (repeatable): stream_latency_ms,
     /// pose_noise_mm, slow, stall, error, estop, safety_stop, latency_jitter_ms,
     /// latency_outliers, drop_frames, late_frames, tracking, following_error_deg,
-    /// servoj_speed_tolerance, brake_decel_deg_s2 (see the twin's documentation).
+    /// servoj_speed_tolerance, brake_decel_deg_s2, collision_level_n, collision (see the twin's
+    /// documentation).
     #[arg(long = "fault", value_name = "NAME=VALUE")]
     pub faults: Vec<String>,
     /// A controller as strict as a real one on a real network: drives 8 ms behind their set
     /// points with a 15 ms lag, replies jittering (2 ms, one in 200 a further 30 ms late), one
-    /// CNDE frame in 100 lost and one in 100 held 20 ms. `--fault` flags given too apply after.
+    /// CNDE frame in 100 lost and one in 100 held 20 ms, collision detection at 150 N.
+    /// `--fault` flags given too apply after.
     #[arg(long)]
     pub strict: bool,
     /// The drives' delay and lag from a `fairgrasp sysid` file: the twin's arm then follows

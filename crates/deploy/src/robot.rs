@@ -36,6 +36,10 @@ pub struct RobotState {
     pub gripper_motion_done: bool,
     pub gripper_active: bool,
     pub gripper_fault: i32,
+    /// The gripper's current, % of its rating (`gripper_current`): a gripper holding an object
+    /// draws the current of its force setting.
+    #[serde(default)]
+    pub gripper_current: u8,
     /// The controller detected a collision (`collision_state`).
     pub collision: bool,
     /// The controller's clock when it took the state (`robot_time`, ms since the start of the
@@ -62,6 +66,7 @@ impl Default for RobotState {
             gripper_motion_done: true,
             gripper_active: true,
             gripper_fault: 0,
+            gripper_current: 0,
             collision: false,
             controller_clock_ms: None,
         }

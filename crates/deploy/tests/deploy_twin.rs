@@ -165,6 +165,19 @@ fn a_following_error_stops_the_arm_and_is_named() {
     );
 }
 
+/// A collision the controller detects (forced here; `collision_level_n` detects real ones):
+/// the loop stops, naming the collision rather than its fault code, and the arm, braked by the
+/// controller at once, is at rest within its braking time of the StopMotion (`run_with`).
+#[test]
+fn a_collision_stops_the_arm_and_is_named() {
+    let (report, twin) = run_with(Some(("collision", "1")), 20, 1);
+    check_stopped(&report, &twin, "collision");
+    let text = report.fault.unwrap().to_string();
+    assert!(text.contains("collision"), "{text}");
+    let state = twin.state();
+    assert!(state.collision && state.main_code == 201, "{state:?}");
+}
+
 /// On a twin as strict as a real controller (`fairgrasp twin --strict`: lagging drives,
 /// jittering replies, lost and late frames) the fixture policy runs its episodes without a
 /// fault, and the ServoJ rule never refuses the loop's set points.
@@ -185,6 +198,10 @@ fn without_faults_episodes_run_on_a_strict_twin() {
         .count();
     assert_eq!(refused, 0);
     assert_eq!(twin.state().main_code, 0);
+    assert!(
+        !twin.state().collision,
+        "the policy's grasps are not collisions"
+    );
 }
 
 #[test]

@@ -16,7 +16,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{twin_client, twin_client_with};
+use common::{DRIVE_SETTLE_S, twin_client, twin_client_with, until_rest};
 
 fn twin() -> TwinHandle {
     Twin::spawn(TwinConfig::ephemeral()).unwrap()
@@ -511,6 +511,12 @@ fn a_scripted_grasp_over_xmlrpc_succeeds_by_the_tasks_rule() {
     );
     let r = result(&c);
     assert!(r[2] > 50.0 && r[4] == 0.0 && r[5] == 1.0, "{r:?}");
+    let s = twin.state();
+    assert!(!s.collision && s.main_code == 0, "a grasp is no collision");
+    assert!(
+        s.gripper_current == 50 && s.gripper_motion_done,
+        "holding: {s:?}"
+    );
 
     // The next reset counts the episode and places a new cube.
     assert_eq!(code(&c, "TwinReset", &[Value::Int(6)]), 0);
@@ -526,6 +532,69 @@ fn a_scripted_grasp_over_xmlrpc_succeeds_by_the_tasks_rule() {
     // An episode where nothing moved is not counted.
     assert_eq!(code(&c, "TwinReset", &[Value::Int(7)]), 0);
     assert_eq!(twin.tally().episodes, 1);
+}
+
+/// IK over XML-RPC: joints for `pose`.
+fn ik(c: &XmlRpcClient, pose: [f64; 6]) -> [f64; 6] {
+    let r = numbers(
+        c,
+        "GetInverseKin",
+        &[Value::Int(0), Value::doubles(&pose), Value::Int(-1)],
+    );
+    assert_eq!(r[0], 0.0, "IK of {pose:?}");
+    std::array::from_fn(|j| r[j + 1])
+}
+
+/// A MoveJ that drives the fingertips 60 mm into the table beside the cube: the controller
+/// detects the collision, the MoveJ answers 14, the stream shows `collision_state` 1 with the
+/// twin's code (201, the joint), the arm brakes to rest within its braking time (the twin's
+/// clock), motion is refused until `ResetAllError` clears it. With detection `off` the same
+/// press goes unnoticed.
+#[test]
+fn pressing_the_fingers_into_the_table_is_a_collision_over_xmlrpc() {
+    let press = |level: &str| {
+        let twin = twin();
+        let c = client(&twin);
+        let inject = [Value::from("collision_level_n"), Value::from(level)];
+        assert_eq!(code(&c, "TwinInjectFault", &inject), 0);
+        let cube = twin.object_pose().unwrap();
+        let tcp = numbers(&c, "GetActualTCPPose", &[Value::Int(1)]);
+        let [x, y, z] = cube.position.map(|v| v * 1000.0);
+        let beside = |dz: f64| [x, y + 120.0, z + dz, 180.0, 0.0, tcp[6]];
+        assert_eq!(code(&c, "MoveJ", &move_j(&ik(&c, beside(100.0)), 60.0)), 0);
+        let answer = code(&c, "MoveJ", &move_j(&ik(&c, beside(-60.0)), 20.0));
+        // Watched from the answer on, which comes as the move is stopped.
+        let (fastest, rest) = until_rest(&twin);
+        (twin, c, answer, fastest, rest)
+    };
+    let (twin, c, answer, fastest, rest) = press("150");
+    assert_eq!(answer, 14, "the press is stopped");
+    let stream = cnde(&twin);
+    let s = stream.latest().unwrap().state;
+    assert!(s.collision, "collision_state in the stream: {s:?}");
+    assert_eq!(s.main_code, 201);
+    assert!((1..=6).contains(&s.sub_code), "{s:?}");
+    let err = numbers(&c, "GetRobotErrorCode", &[]);
+    assert_eq!(err[..2], [0.0, 201.0]);
+    let since = twin.with_controller(|c| c.collision_since()).unwrap();
+    let decel = twin.with_controller(|c| c.config().brake_decel_deg_s2);
+    // The press moves at 20 % (36 deg/s at most): braked in 50 ms, settled after.
+    let allowed = 36.0 / decel + DRIVE_SETTLE_S;
+    assert!(
+        rest - since < allowed,
+        "at rest {:.0} ms after the collision (fastest seen after {fastest:.1} deg/s)",
+        (rest - since) * 1e3
+    );
+    assert_eq!(code(&c, "MoveJ", &move_j(&joints(&c), 20.0)), 14);
+    assert_eq!(code(&c, "ResetAllError", &[]), 0);
+    assert!(eventually(Duration::from_secs(2), || {
+        let s = stream.latest().unwrap().state;
+        !s.collision && s.main_code == 0
+    }));
+
+    let (twin, _, answer, _, _) = press("off");
+    assert_eq!(answer, 0, "undetected, the press ends");
+    assert!(!twin.state().collision && twin.state().main_code == 0);
 }
 
 /// A servo session from `from`: 25 ServoJ 8 ms apart, joint 1 up 0.2° each; returns the last

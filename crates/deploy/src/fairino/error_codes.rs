@@ -63,9 +63,10 @@ pub fn error_code_meaning(code: i64) -> &'static str {
         108 => "wrong spiral start point",
         112 => "target pose unreachable",
         130 => "point table not found",
-        // Not a FAIRINO code: the twin's main_code for a following error (FAIRINO documents
-        // none), so a rehearsal's stop names its cause.
+        // Not FAIRINO codes: the twin's main_codes for a following error and a collision
+        // (FAIRINO documents none), so a rehearsal's stop names its cause.
         200 => "following error (the fairgrasp twin's main_code)",
+        201 => "collision (the fairgrasp twin's main_code; collision_state is set too)",
         _ => "unknown error code",
     }
 }

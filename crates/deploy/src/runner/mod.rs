@@ -332,7 +332,7 @@ impl Deployment {
     }
 
     /// A refused call is often the echo of a state the stream had not shown yet (an e-stop, a
-    /// safety stop, a fault code) or of the stream's own failure: once the arm is stopped,
+    /// safety stop, a collision, a fault code) or of the stream's own failure: once the arm is stopped,
     /// look at the stream for up to 50 ms and name that state instead.
     fn root_cause(&mut self, fault: Fault) -> Fault {
         if !matches!(fault, Fault::CallFailed { .. }) {
@@ -349,6 +349,7 @@ impl Deployment {
                     if let Err(
                         f @ (Fault::EmergencyStop
                         | Fault::SafetyStop(_)
+                        | Fault::Collision
                         | Fault::ControllerFault { .. }),
                     ) = self.watchdog.check(&s, self.link.now())
                     {

@@ -44,15 +44,16 @@ impl Watchdog {
         if let Some(i) = s.safety_stop.iter().position(|&on| on) {
             return Err(Fault::SafetyStop(i));
         }
+        // A collision comes with a fault code too; the collision is the cause, so it is named.
+        if s.collision {
+            return Err(Fault::Collision);
+        }
         if s.main_code != 0 {
             return Err(Fault::ControllerFault {
                 main_code: s.main_code,
                 sub_code: s.sub_code,
                 meaning: (self.meaning)(s.main_code as i64).to_string(),
             });
-        }
-        if s.collision {
-            return Err(Fault::Collision);
         }
         if let Some(t) = s.controller_clock_ms {
             let mut clock = self.clock.lock().unwrap_or_else(|p| p.into_inner());
@@ -113,6 +114,18 @@ mod tests {
         let fault = watchdog().check(&report(state, Instant::now(), 1), Instant::now());
         assert_eq!(fault, Err(Fault::Collision));
         assert!(Fault::Collision.to_string().contains("collision"));
+        let with_code = RobotState {
+            collision: true,
+            main_code: 201,
+            sub_code: 3,
+            ..RobotState::default()
+        };
+        let fault = watchdog().check(&report(with_code, Instant::now(), 1), Instant::now());
+        assert_eq!(
+            fault,
+            Err(Fault::Collision),
+            "the cause is named, not its code"
+        );
     }
 
     /// Frames that keep arriving on time but carry a controller clock that has stopped are

@@ -10,6 +10,10 @@ use crate::twin::faults::TrackingModel;
 use crate::twin::motion::{Drives, ServoStep};
 use crate::twin::world::World;
 
+/// The replay's fingers stay open at the force the simulated drive has of its own (the twin's
+/// 50 %): no object is held, so only the arm's motion matters.
+const OPEN_GRIPPER_FORCE_PERCENT: f64 = 50.0;
+
 /// How long the replayed arm rests at the start pose first (s): the drives' integral action
 /// learns the sag, as it had on the arm before the recording.
 const SETTLE_S: f64 = 1.0;
@@ -53,6 +57,7 @@ impl ArmSim {
         let hold = Setpoint {
             joints_deg: start,
             gripper_percent: 100.0,
+            gripper_force_percent: OPEN_GRIPPER_FORCE_PERCENT,
         };
         for _ in 0..(SETTLE_S / dt).round() as usize {
             world.step(&hold)?;
@@ -85,6 +90,7 @@ impl ArmSim {
             world.step(&Setpoint {
                 joints_deg: set_point,
                 gripper_percent: 100.0,
+                gripper_force_percent: OPEN_GRIPPER_FORCE_PERCENT,
             })?;
             let q = world.measure().joints_deg;
             for j in 0..6 {

@@ -50,9 +50,16 @@
 //! - **Gripper**: `ActGripper(index 1…8, 1)` activates, `(…, 0)` resets; `MoveGripper` before
 //!   activation → 73; position, speed and force in 0…100 % (else 4); `maxtime` 0…30000 ms (0:
 //!   30 s). The set point moves at the speed % of the simulated fingers' own speed
-//!   ([`fairgrasp_sim::control::FINGERS_FULL_SPEED_PERCENT_PER_S`]); force is accepted and not modelled (the
-//!   simulated fingers have their own).
-//!   Motion done on arrival, on a stall (an object between the fingers) or after `maxtime`.
+//!   ([`fairgrasp_sim::control::FINGERS_FULL_SPEED_PERCENT_PER_S`]); the force % is the
+//!   fingers' squeezing force (50 % the simulated drive's own, see [`super::world`]).
+//!   Motion done on arrival, on a stall (an object between the fingers) or after `maxtime`;
+//!   stalled short of a closing target it holds: the gripper's current reads the force %
+//!   (see [`super::gripper`]).
+//! - **Collision detection** ([`ControllerConfig::collision_level_n`]): a net contact force on
+//!   the robot above the level (see [`super::world`] for what counts) sets `collision_state`,
+//!   raises [`MAIN_CODE_COLLISION`] with the joint carrying the link that pressed hardest in
+//!   `sub_code`, and the arm brakes. `ResetAllError` clears both; detection then waits for the
+//!   force to fall below the level, so an arm still pressing can be moved clear.
 //! - **Kinematics**: the simulator's chain from the arm base to the gripper's centre point (the
 //!   TCP as if the gripper were configured as the tool). Poses are `[x, y, z, rx, ry, rz]` in mm
 //!   and degrees, base frame, `R = Rz(rz)·Ry(ry)·Rx(rx)` (fixed X-Y-Z angles). IK failure → 28.
@@ -92,6 +99,18 @@ pub const MAIN_CODE_SERVOJ_OVER_LIMIT: i32 = 29;
 /// `main_code` of a following error, `sub_code` the joint (1–6). FAIRINO documents no number
 /// for it; the twin's choice, outside the documented ones.
 pub const MAIN_CODE_FOLLOWING_ERROR: i32 = 200;
+
+/// `main_code` of a collision the controller detected, `sub_code` the arm joint (1–6) that
+/// carries the link pressing hardest (0 for a forced one). FAIRINO documents `collision_state`
+/// in the stream but no code for it; the twin's choice, next to the following error's.
+pub const MAIN_CODE_COLLISION: i32 = 201;
+
+/// The collision level by default (N of net external force on the robot): FAIRINO documents
+/// levels 1–10 per joint (`SetAnticollision`) but no forces, so this is the twin's choice: a
+/// lenient one that leaves earlier transfer figures comparable (the deployment policy's 200
+/// deployment-matched episodes trip it in none; at 250 N, 3 at speed scale 0.25), well below
+/// the fingertips driven into the table at 20 % speed (over 600 N). `--strict` sets 150 N.
+pub const DEFAULT_COLLISION_LEVEL_N: f64 = 400.0;
 
 /// The ServoJ speed tolerance by default: 5 % over the published top speed.
 pub const DEFAULT_SERVO_SPEED_TOLERANCE: f64 = 0.05;
@@ -139,6 +158,9 @@ pub struct ControllerConfig {
     pub following_error_deg: Option<f64>,
     /// How the drives follow their set points.
     pub tracking: TrackingModel,
+    /// Net external force on the robot (N) above which the controller detects a collision;
+    /// `None`: detection off.
+    pub collision_level_n: Option<f64>,
 }
 
 impl ControllerConfig {
@@ -157,6 +179,7 @@ impl ControllerConfig {
             brake_decel_deg_s2: DEFAULT_BRAKE_DECEL_DEG_S2,
             following_error_deg: Some(DEFAULT_FOLLOWING_ERROR_DEG),
             tracking: TrackingModel::default(),
+            collision_level_n: Some(DEFAULT_COLLISION_LEVEL_N),
         }
     }
 }
@@ -168,6 +191,10 @@ pub struct Measured {
     pub joint_speeds_deg: Joints,
     /// Gripper opening, % of the stroke.
     pub gripper_percent: f64,
+    /// The net force of everything outside the robot on it (N): what collision detection feels.
+    pub contact_force_n: f64,
+    /// The arm joint (1–6) carrying the link that presses hardest; 0 when nothing touches.
+    pub contact_joint: i32,
 }
 
 /// What the simulation should track.
@@ -175,6 +202,8 @@ pub struct Measured {
 pub struct Setpoint {
     pub joints_deg: Joints,
     pub gripper_percent: f64,
+    /// The force the fingers squeeze with, % (`MoveGripper`'s force).
+    pub gripper_force_percent: f64,
 }
 
 #[derive(Clone, Debug)]
@@ -232,6 +261,12 @@ pub struct Controller {
     measured: Measured,
     gripper: Gripper,
     motion_commands: u64,
+    /// `collision_state`: a collision was detected (or forced) and not yet reset, and when.
+    collision: bool,
+    collision_at: f64,
+    /// Detection waits for the contact force to fall below the level after a collision, so a
+    /// reset arm still pressing can be moved clear.
+    collision_armed: bool,
 }
 
 /// A TCP pose as the controller reports it: mm and degrees, fixed X-Y-Z angles.
@@ -290,9 +325,13 @@ impl Controller {
                 joints_deg: home_deg,
                 joint_speeds_deg: [0.0; 6],
                 gripper_percent: 100.0,
+                ..Measured::default()
             },
             gripper: Gripper::new(start.gripper_active),
             motion_commands: 0,
+            collision: false,
+            collision_at: 0.0,
+            collision_armed: true,
         }
     }
 
@@ -410,6 +449,7 @@ impl Controller {
             Some(f) if !f.resettable => codes::NOT_RESETTABLE,
             _ => {
                 self.fault = None;
+                self.collision = false;
                 codes::OK
             }
         }
@@ -441,10 +481,36 @@ impl Controller {
         self.safety = inputs;
     }
 
+    /// A collision: `collision_state` 1, [`MAIN_CODE_COLLISION`] with `joint` as the sub code,
+    /// the arm brakes. `false` clears the collision state and its fault.
+    pub fn set_collision(&mut self, now: f64, on: bool, joint: i32) {
+        if !on {
+            self.collision = false;
+            if self
+                .fault
+                .as_ref()
+                .is_some_and(|f| f.main == MAIN_CODE_COLLISION)
+            {
+                self.fault = None;
+            }
+            return;
+        }
+        self.raise(now, MAIN_CODE_COLLISION, joint);
+        self.collision = true;
+        self.collision_at = now;
+        self.collision_armed = false;
+    }
+
+    /// When the collision standing now was detected (twin time, s).
+    pub fn collision_since(&self) -> Option<f64> {
+        self.collision.then_some(self.collision_at)
+    }
+
     /// Raises a fault (`main` ≠ 0: the arm stops) or clears it (`main` = 0).
     pub fn set_fault(&mut self, now: f64, main: i32, sub: i32, resettable: bool) {
         if main == 0 {
             self.fault = None;
+            self.collision = false;
             return;
         }
         self.abort(now, codes::EXECUTION_FAILED);
@@ -681,7 +747,7 @@ impl Controller {
         self.motion_commands += 1;
         Ok(self
             .gripper
-            .command(now, percent[0] as f64, percent[1] as f64, max_time))
+            .command(now, percent.map(|p| p as f64), max_time))
     }
 
     /// Whether gripper command `command` is still moving.
@@ -742,6 +808,7 @@ impl Controller {
         Setpoint {
             joints_deg,
             gripper_percent: self.gripper.setpoint(now),
+            gripper_force_percent: self.gripper.force_percent,
         }
     }
 
@@ -771,20 +838,35 @@ impl Controller {
         self.config.brake_decel_deg_s2 = deg_s2;
     }
 
-    /// Tracking, following-error limit, ServoJ tolerance and braking back to their defaults.
+    pub fn set_collision_level(&mut self, newtons: Option<f64>) {
+        self.config.collision_level_n = newtons;
+    }
+
+    /// Tracking, following-error limit, ServoJ tolerance, braking and the collision level back
+    /// to their defaults.
     pub fn restore_drive_defaults(&mut self) {
         self.config.tracking = TrackingModel::default();
         self.config.following_error_deg = Some(DEFAULT_FOLLOWING_ERROR_DEG);
         self.config.servo_speed_tolerance = DEFAULT_SERVO_SPEED_TOLERANCE;
         self.config.brake_decel_deg_s2 = DEFAULT_BRAKE_DECEL_DEG_S2;
+        self.config.collision_level_n = Some(DEFAULT_COLLISION_LEVEL_N);
     }
 
     /// Feeds what the simulation measured at `now`; ends moves that have arrived; a joint too
-    /// far from its set point is a following error.
+    /// far from its set point is a following error; a contact force above the collision level
+    /// is a collision.
     pub fn observe(&mut self, now: f64, measured: Measured) {
         self.gripper.observe(now, measured.gripper_percent);
         self.measured = measured;
         self.measured_at = now;
+        if let Some(level) = self.config.collision_level_n {
+            let force = self.measured.contact_force_n;
+            if force <= level {
+                self.collision_armed = true;
+            } else if self.collision_armed && self.fault.is_none() && !self.collision {
+                self.set_collision(now, true, self.measured.contact_joint);
+            }
+        }
         if let Some(limit) = self.config.following_error_deg
             && self.fault.is_none()
             && self.enabled
@@ -860,7 +942,8 @@ impl Controller {
             gripper_motion_done: self.gripper.done,
             gripper_active: self.gripper.active,
             gripper_fault: 0,
-            collision: false,
+            gripper_current: self.gripper.current_percent().round() as u8,
+            collision: self.collision,
             controller_clock_ms: Some((self.measured_at * 1000.0).round() as i64),
         }
     }

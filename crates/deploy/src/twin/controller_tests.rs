@@ -55,6 +55,7 @@ impl Bench {
                 joints_deg: self.q,
                 joint_speeds_deg: speeds,
                 gripper_percent: self.gripper,
+                ..Measured::default()
             },
         );
     }

@@ -26,6 +26,8 @@
 //! | `following_error_deg` | deg, `off` | a set point and actual joint further apart than this is a fault: the arm brakes, main_code 200, sub_code the joint (default 20°) |
 //! | `servoj_speed_tolerance` | fraction | a ServoJ step may exceed the joint's top speed by this share before it is refused with 29 (default 0.05) |
 //! | `brake_decel_deg_s2` | deg/s² | how hard the set point brakes when the arm stops (default 720) |
+//! | `collision_level_n` | N, `off` | a net contact force on the robot above this is a collision: `collision_state` 1, main_code 201, sub_code the joint carrying the link that pressed hardest, the arm brakes (default 400; `--strict` 150) |
+//! | `collision` | 1 / 0 | a collision now (`collision_state` 1, main_code 201, sub_code 0, the arm brakes) / its state and fault cleared |
 //! | `clear` | any | everything above back to normal, faults cleared |
 //!
 //! Draws (jitter, outliers, dropped and late frames) come from random streams seeded by the
@@ -155,11 +157,14 @@ pub enum FaultCommand {
     FollowingErrorDeg(Option<f64>),
     ServojSpeedTolerance(f64),
     BrakeDecelDegS2(f64),
+    /// `None`: detection off.
+    CollisionLevelN(Option<f64>),
+    Collision(bool),
     Clear,
 }
 
 /// The fault names [`FaultCommand::parse`] knows.
-pub const FAULT_NAMES: [&str; 19] = [
+pub const FAULT_NAMES: [&str; 21] = [
     "latency_ms",
     "stream_latency_ms",
     "joint_noise_deg",
@@ -178,13 +183,16 @@ pub const FAULT_NAMES: [&str; 19] = [
     "following_error_deg",
     "servoj_speed_tolerance",
     "brake_decel_deg_s2",
+    "collision_level_n",
+    "collision",
     "clear",
 ];
 
 /// `fairgrasp twin --strict`: a controller as a real one behaves on a real network. None of
 /// these figures is published by FAIRINO; each is a modest choice (docs/deployment.md):
 /// drives 8 ms behind their set point with a 15 ms lag, replies jittering by 2 ms with one
-/// in 200 a further 30 ms late, one CNDE frame in 100 lost and one in 100 held 20 ms.
+/// in 200 a further 30 ms late, one CNDE frame in 100 lost and one in 100 held 20 ms, and
+/// collision detection at 150 N.
 pub fn strict() -> Vec<FaultCommand> {
     vec![
         FaultCommand::Tracking(
@@ -203,8 +211,13 @@ pub fn strict() -> Vec<FaultCommand> {
             probability: 0.01,
             ms: 20.0,
         })),
+        FaultCommand::CollisionLevelN(Some(STRICT_COLLISION_LEVEL_N)),
     ]
 }
+
+/// The collision level `--strict` sets (N): the figure common cobot safety settings use for a
+/// collaborative stop (chosen: FAIRINO publishes levels, not forces).
+pub const STRICT_COLLISION_LEVEL_N: f64 = 150.0;
 
 fn number(name: &str, value: &str, max: f64) -> Result<f64, String> {
     let v: f64 = value
@@ -303,6 +316,17 @@ impl FaultCommand {
                 }
                 Self::BrakeDecelDegS2(v)
             }
+            "collision_level_n" => Self::CollisionLevelN(match value.trim() {
+                "off" => None,
+                v => {
+                    let n = number(name, v, 100_000.0)?;
+                    if n < 1.0 {
+                        return Err(format!("{name}: must be at least 1 N (or `off`), got {n}"));
+                    }
+                    Some(n)
+                }
+            }),
+            "collision" => Self::Collision(flag(name, value)?),
             "clear" => Self::Clear,
             other => {
                 return Err(format!(
@@ -446,6 +470,10 @@ impl fmt::Display for FaultCommand {
             Self::FollowingErrorDeg(Some(v)) => write!(f, "following error limit {v}°"),
             Self::ServojSpeedTolerance(v) => write!(f, "ServoJ speed tolerance {v}"),
             Self::BrakeDecelDegS2(v) => write!(f, "braking deceleration {v} deg/s²"),
+            Self::CollisionLevelN(None) => write!(f, "collision detection off"),
+            Self::CollisionLevelN(Some(v)) => write!(f, "collision level {v} N"),
+            Self::Collision(true) => write!(f, "collision"),
+            Self::Collision(false) => write!(f, "collision cleared"),
             Self::Clear => write!(f, "all faults cleared"),
         }
     }
@@ -542,6 +570,19 @@ mod tests {
             FaultCommand::parse("drop_frames", "0.1").unwrap(),
             FaultCommand::DropFrames(0.1)
         );
+        assert_eq!(
+            FaultCommand::parse_assignment("collision_level_n=180").unwrap(),
+            FaultCommand::CollisionLevelN(Some(180.0))
+        );
+        assert_eq!(
+            FaultCommand::parse("collision_level_n", "off").unwrap(),
+            FaultCommand::CollisionLevelN(None)
+        );
+        assert_eq!(
+            FaultCommand::parse("collision", "1").unwrap(),
+            FaultCommand::Collision(true)
+        );
+        assert!(strict().contains(&FaultCommand::CollisionLevelN(Some(150.0))));
         for (name, value) in [
             ("tracking", "1,2,3"),
             ("tracking", "-1,2"),
@@ -551,6 +592,9 @@ mod tests {
             ("following_error_deg", "0"),
             ("brake_decel_deg_s2", "0"),
             ("servoj_speed_tolerance", "x"),
+            ("collision_level_n", "0"),
+            ("collision_level_n", "much"),
+            ("collision", "2"),
         ] {
             let e = FaultCommand::parse(name, value).unwrap_err();
             assert!(e.contains(name), "{e}");

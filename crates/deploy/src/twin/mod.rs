@@ -278,6 +278,8 @@ impl Shared {
                 self.controller().set_servo_speed_tolerance(*v)
             }
             FaultCommand::BrakeDecelDegS2(v) => self.controller().set_brake_decel(*v),
+            FaultCommand::CollisionLevelN(v) => self.controller().set_collision_level(*v),
+            FaultCommand::Collision(on) => self.controller().set_collision(now, *on, 0),
             FaultCommand::Clear => {
                 *settings() = FaultSettings::default();
                 self.cnde.set_stalled(false);

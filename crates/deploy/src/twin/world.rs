@@ -7,13 +7,25 @@
 //! `[shapes]` section enables them. Episodes are judged by the task's own evaluation on
 //! [`ArmState::from_scene`], once per control period, as in training: success and failure (an
 //! object off the table) latch until the next reset.
+//!
+//! Two things the training scene does not need are read or set here, for the controller:
+//! - **Contact force** (what the controller's collision detection feels): the net force that
+//!   everything outside the robot (the table, objects, bin parts) exerts on the arm and the
+//!   gripper, averaged over [`CONTACT_WINDOW`] physics steps. A gripper's squeeze on what it
+//!   holds is internal to the gripper: the pads' forces cancel, as they do for the arm's joint
+//!   torques, and only the held object's weight remains. A link or a fingertip pressing on the
+//!   table, or on an object resting there, counts in full. The joint reported with it is the
+//!   arm joint (1–6) that carries the link pressing hardest.
+//! - **Gripper force**: `MoveGripper`'s force % sets the finger drive's force limit, scaled so
+//!   that [`NOMINAL_FORCE_PERCENT`] is the scene's own `gripper.force_limit` (the force training
+//!   used).
 
 use super::controller::{Measured, Setpoint};
 use crate::error::{DeployError, Result};
 use fairgrasp_env::arm::{ArmState, ArmWorld};
 use fairgrasp_env::registry;
 use fairgrasp_sim::kinematics::SerialChain;
-use fairgrasp_sim::rapier3d::na::Isometry3;
+use fairgrasp_sim::rapier3d::na::{Isometry3, Vector3};
 use fairgrasp_sim::scene::Scene;
 use serde::Serialize;
 
@@ -36,6 +48,13 @@ pub struct EpisodeResult {
     /// Object 0 is held right now (both pads on it, gripper closing).
     pub grasped: bool,
 }
+
+/// Physics steps the contact force is averaged over (one step's solver impulse alone can spike).
+pub const CONTACT_WINDOW: usize = 4;
+
+/// The `MoveGripper` force % at which the fingers squeeze with the scene's `gripper.force_limit`
+/// (the deployment loop's own setting, so that deployment meets the fingers training saw).
+pub const NOMINAL_FORCE_PERCENT: f64 = 50.0;
 
 /// Integral gain of the drives' position loop (1/s).
 const DRIVE_KI: f64 = 4.0;
@@ -60,6 +79,13 @@ pub struct World {
     episode: EpisodeResult,
     drive_bias: [f64; 6],
     last_setpoint: Option<[f64; 6]>,
+    /// The arm joint (1–6; 0 for the base) that carries each robot link.
+    link_joint: std::collections::HashMap<String, i32>,
+    /// The net external force on the robot in the last physics steps (N, world frame), newest
+    /// last, with the joint carrying the link pressing hardest.
+    contacts: std::collections::VecDeque<(Vector3<f32>, i32)>,
+    /// The force % the finger drive squeezes with now.
+    gripper_force_percent: f64,
 }
 
 impl World {
@@ -80,6 +106,22 @@ impl World {
         let chain = SerialChain::new(&scene.robot().model, "tcp")
             .map_err(|e| DeployError::Env(e.into()))?;
         let substeps = scene.config().physics.substeps;
+        let model = &scene.robot().model;
+        let arm = scene.arm_joint_names();
+        let link_joint = (0..model.links.len())
+            .map(|l| {
+                let mut link = l;
+                let mut joint = 0;
+                while let Some(j) = model.parent_joint(link) {
+                    if let Some(k) = arm.iter().position(|&n| n == model.joints[j].name) {
+                        joint = k as i32 + 1;
+                        break;
+                    }
+                    link = model.joints[j].parent;
+                }
+                (model.links[l].name.clone(), joint)
+            })
+            .collect();
         let mut world = Self {
             env_id: env_id.to_string(),
             inner,
@@ -89,6 +131,9 @@ impl World {
             episode: EpisodeResult::default(),
             drive_bias: [0.0; 6],
             last_setpoint: None,
+            link_joint,
+            contacts: std::collections::VecDeque::with_capacity(CONTACT_WINDOW + 1),
+            gripper_force_percent: NOMINAL_FORCE_PERCENT,
         };
         world.start_episode(seed)?;
         Ok(world)
@@ -129,6 +174,7 @@ impl World {
         self.inner.start_episode(seed)?;
         self.drive_bias = [0.0; 6];
         self.last_setpoint = None;
+        self.contacts.clear();
         self.episode = EpisodeResult {
             number: self.episode.number + 1,
             seed,
@@ -166,10 +212,20 @@ impl World {
             .map(|j| (sp[j] + self.drive_bias[j]).to_radians() as f32)
             .collect();
         scene.set_arm_targets(&q).map_err(sim)?;
+        if setpoint.gripper_force_percent != self.gripper_force_percent {
+            let nominal = scene.config().gripper.force_limit as f64;
+            // A drive with no force at all would not move; 1 % is the least it is given.
+            let share = setpoint.gripper_force_percent.max(1.0) / NOMINAL_FORCE_PERCENT;
+            scene
+                .set_gripper_force_limit((nominal * share) as f32)
+                .map_err(sim)?;
+            self.gripper_force_percent = setpoint.gripper_force_percent;
+        }
         let opening = (setpoint.gripper_percent / 100.0) as f32 * scene.max_opening();
         scene.set_gripper_target(opening).map_err(sim)?;
         scene.step_physics().map_err(sim)?;
         self.physics_steps += 1;
+        self.read_contacts();
         let still = self
             .last_setpoint
             .is_some_and(|last| super::motion::max_gap(&last, &sp) < DRIVE_LEARN_SPEED * dt);
@@ -186,6 +242,40 @@ impl World {
             self.judge();
         }
         Ok(())
+    }
+
+    /// Adds the last physics step's external force on the robot to the window.
+    fn read_contacts(&mut self) {
+        let mut net = Vector3::zeros();
+        let mut hardest = (0.0f32, 0);
+        for c in self.inner.scene().robot_contacts() {
+            net += c.force;
+            let n = c.force.norm();
+            if n > hardest.0 {
+                hardest = (n, self.link_joint.get(&c.link).copied().unwrap_or(0));
+            }
+        }
+        if self.contacts.len() == CONTACT_WINDOW {
+            self.contacts.pop_front();
+        }
+        self.contacts.push_back((net, hardest.1));
+    }
+
+    /// The net external force on the robot (N) over the last [`CONTACT_WINDOW`] physics steps,
+    /// and the arm joint (1–6) carrying the link that pressed hardest most recently.
+    pub fn contact_force(&self) -> (f64, i32) {
+        if self.contacts.is_empty() {
+            return (0.0, 0);
+        }
+        let sum: Vector3<f32> = self.contacts.iter().map(|(f, _)| f).sum();
+        let joint = self
+            .contacts
+            .iter()
+            .rev()
+            .map(|&(_, j)| j)
+            .find(|&j| j > 0)
+            .unwrap_or(0);
+        ((sum.norm() / self.contacts.len() as f32) as f64, joint)
     }
 
     fn judge(&mut self) {
@@ -206,7 +296,12 @@ impl World {
 
     /// What the controller's encoders and the gripper read now.
     pub fn measure(&self) -> Measured {
-        measure(self.scene())
+        let (contact_force_n, contact_joint) = self.contact_force();
+        Measured {
+            contact_force_n,
+            contact_joint,
+            ..measure(self.scene())
+        }
     }
 
     /// Object 0's pose in the robot base frame (m).
@@ -228,6 +323,7 @@ pub fn measure(scene: &Scene) -> Measured {
         joints_deg: deg(&q),
         joint_speeds_deg: deg(&qd),
         gripper_percent: (scene.gripper_opening() / scene.max_opening()) as f64 * 100.0,
+        ..Measured::default()
     }
 }
 
@@ -337,12 +433,21 @@ mod tests {
         let down = rig.c.inverse_kin(&pose(0.0)).unwrap();
         rig.move_j(down, 20.0);
         let g = rig.c.move_gripper(rig.t, 1, [0, 100, 50], 3000).unwrap();
+        let mut peak = 0.0f64;
         while rig.c.gripper_moving(g) {
             rig.step();
+            peak = peak.max(rig.world.contact_force().0);
         }
         let up = rig.c.inverse_kin(&pose(120.0)).unwrap();
-        rig.move_j(up, 30.0);
+        let (code, lift_peak) = rig.move_j_outcome(up, 30.0);
+        assert_eq!(code, codes::OK);
         rig.run(0.6);
+        eprintln!("contact force: closing {peak:.1} N, lifting {lift_peak:.1} N");
+        assert!(
+            peak.max(lift_peak) < crate::twin::faults::STRICT_COLLISION_LEVEL_N / 3.0,
+            "a grasp is far from a collision: {peak} N, {lift_peak} N"
+        );
+        assert!(!rig.c.state().collision);
         let e = rig.world.episode();
         assert!(e.success, "{e:?}");
         assert!(e.grasped && e.max_lift > 0.05, "{e:?}");
@@ -351,6 +456,174 @@ mod tests {
         let held = rig.world.object_pose().unwrap();
         let tcp_now = wire_to_pose(&rig.c.state().tcp);
         assert!((held.translation.vector - tcp_now.translation.vector).norm() < 0.03);
+    }
+
+    impl Rig {
+        /// The TCP pose (wire form) above object 0, grasping it across two faces, `dz` mm
+        /// above its centre, shifted `dy` mm.
+        fn grasp_pose(&self, dz: f64, dy: f64) -> [f64; 6] {
+            let object = self.world.object_pose().unwrap();
+            let tcp = pose_to_wire(
+                &self
+                    .world
+                    .chain()
+                    .forward(&self.world.home_deg().map(f64::to_radians)),
+            );
+            let yaw = grasp_yaw(object.rotation.euler_angles().2.to_degrees(), tcp[5]);
+            let p = object.translation.vector * 1000.0;
+            [p.x, p.y + dy, p.z + dz, 180.0, 0.0, yaw]
+        }
+
+        /// Sends a MoveJ to `target` and steps until it ends; returns its outcome and the
+        /// largest contact force met (N).
+        fn move_j_outcome(&mut self, target: [f64; 6], vel: f64) -> (i32, f64) {
+            let ticket = self.c.move_j(self.t, target, vel, 0.0, 100.0).unwrap();
+            let mut peak = 0.0f64;
+            for _ in 0..5000 {
+                if let Some(code) = self.c.outcome(ticket) {
+                    return (code, peak);
+                }
+                self.step();
+                peak = peak.max(self.world.contact_force().0);
+            }
+            panic!("MoveJ never ended");
+        }
+
+        /// Steps until the arm is at rest (every joint under 1 deg/s and the controller's
+        /// motion done); returns the twin time it took.
+        fn until_rest(&mut self) -> f64 {
+            let start = self.t;
+            for _ in 0..2000 {
+                let m = self.world.measure();
+                let top = m
+                    .joint_speeds_deg
+                    .iter()
+                    .fold(0.0f64, |a, v| a.max(v.abs()));
+                if top < 1.0 && self.c.motion_done() {
+                    return self.t - start;
+                }
+                self.step();
+            }
+            panic!("the arm never came to rest");
+        }
+
+        /// The pads' mean normal force on object 0 now (N).
+        fn squeeze(&self) -> f64 {
+            let pads: Vec<f64> = (self.world.scene().robot_contacts().iter())
+                .filter(|c| c.finger && c.other == fairgrasp_sim::scene::ShapeOwner::Object(0))
+                .map(|c| c.force.norm() as f64)
+                .collect();
+            pads.iter().sum::<f64>() / 2.0
+        }
+    }
+
+    /// Above a free spot of the table, then down through it: the fingertips press on the table
+    /// and the controller stops the arm with a collision. Returns the rig, the MoveJ's outcome
+    /// and the largest contact force met.
+    fn press_into_table(level: Option<f64>) -> (Rig, i32, f64) {
+        let mut rig = Rig::new(11);
+        rig.c.set_collision_level(level);
+        // 120 mm beside the cube, so only the table is in the way.
+        let above = rig.c.inverse_kin(&rig.grasp_pose(100.0, 120.0)).unwrap();
+        rig.move_j(above, 60.0);
+        let into = rig.c.inverse_kin(&rig.grasp_pose(-60.0, 120.0)).unwrap();
+        let (code, peak) = rig.move_j_outcome(into, 20.0);
+        (rig, code, peak)
+    }
+
+    #[test]
+    fn pressing_the_fingers_into_the_table_is_a_collision_and_the_arm_brakes() {
+        let (mut rig, code, peak) = press_into_table(Some(150.0));
+        assert_eq!(code, codes::EXECUTION_FAILED, "the move is stopped");
+        let s = rig.c.state();
+        assert!(s.collision, "collision_state set (peak {peak:.0} N)");
+        assert_eq!(s.main_code, crate::twin::controller::MAIN_CODE_COLLISION);
+        assert!((1..=6).contains(&s.sub_code), "the joint: {}", s.sub_code);
+        let settled = rig.until_rest();
+        assert!(settled < 0.5, "at rest {settled:.2} s after the stop");
+        // Gated until reset; the reset clears the state, and the arm still pressing does not
+        // trip it again until the force has fallen below the level.
+        assert_eq!(rig.c.servo_start(), codes::EXECUTION_FAILED);
+        assert_eq!(rig.c.reset_errors(), codes::OK);
+        rig.run(0.1);
+        let s = rig.c.state();
+        assert!(!s.collision && s.main_code == 0, "{s:?}");
+    }
+
+    #[test]
+    fn below_the_level_or_off_nothing_is_detected() {
+        let (rig, code, peak) = press_into_table(None);
+        eprintln!("pressing into the table undetected: {peak:.0} N");
+        let s = rig.c.state();
+        assert!(!s.collision && s.main_code == 0, "off: {s:?}");
+        assert_eq!(code, codes::OK, "off: the move ends");
+        assert!(peak > 150.0, "the press is a real one: {peak} N");
+        let (rig, code, peak_here) = press_into_table(Some(peak * 1.2));
+        let s = rig.c.state();
+        assert!(!s.collision && s.main_code == 0, "below the level: {s:?}");
+        assert_eq!(
+            code,
+            codes::OK,
+            "below the level: the move ends ({peak_here:.0} N)"
+        );
+    }
+
+    /// Closing on the cube with `force` %: the squeeze it holds with, and the controller's
+    /// report once stalled.
+    fn hold_cube(force: i64) -> (f64, crate::robot::RobotState, (i32, i32)) {
+        let mut rig = Rig::new(11);
+        let down = rig.c.inverse_kin(&rig.grasp_pose(0.0, 0.0)).unwrap();
+        let above = rig.c.inverse_kin(&rig.grasp_pose(100.0, 0.0)).unwrap();
+        rig.move_j(above, 60.0);
+        rig.move_j(down, 20.0);
+        let g = rig.c.move_gripper(rig.t, 1, [0, 100, force], 3000).unwrap();
+        while rig.c.gripper_moving(g) {
+            rig.step();
+        }
+        rig.run(0.3);
+        let n = 24;
+        let mut squeeze = 0.0;
+        for _ in 0..n {
+            rig.step();
+            squeeze += rig.squeeze() / n as f64;
+        }
+        (squeeze, rig.c.state(), rig.c.gripper_motion_done())
+    }
+
+    #[test]
+    fn the_gripper_squeezes_with_its_force_and_reports_holding() {
+        let (weak, s20, done20) = hold_cube(20);
+        let (strong, s100, done100) = hold_cube(100);
+        eprintln!("squeeze at 20 %: {weak:.1} N, at 100 %: {strong:.1} N");
+        assert!(strong > 2.0 * weak && weak > 2.0, "{weak} N vs {strong} N");
+        for (s, done, force) in [(&s20, done20, 20), (&s100, done100, 100)] {
+            assert_eq!(done, (0, 1), "motion done while stalled on the cube");
+            assert!(s.gripper_motion_done);
+            assert!(
+                s.gripper_position > 5,
+                "short of closed: {}",
+                s.gripper_position
+            );
+            assert_eq!(
+                s.gripper_current, force,
+                "holding draws the force's current"
+            );
+            assert!(!s.collision, "a grasp is not a collision");
+        }
+    }
+
+    #[test]
+    fn closing_on_nothing_ends_closed_and_holds_nothing() {
+        let mut rig = Rig::new(11);
+        let g = rig.c.move_gripper(rig.t, 1, [0, 100, 100], 3000).unwrap();
+        while rig.c.gripper_moving(g) {
+            rig.step();
+        }
+        rig.run(0.2);
+        let s = rig.c.state();
+        assert_eq!(rig.c.gripper_motion_done(), (0, 1));
+        assert!(s.gripper_position <= 1, "closed: {}", s.gripper_position);
+        assert_eq!(s.gripper_current, 0, "nothing held");
     }
 
     /// The top-down TCP yaw (deg) that grasps a cube of yaw `object` across two faces,

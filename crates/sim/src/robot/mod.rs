@@ -1034,4 +1034,12 @@ impl Robot {
         let l = self.model.link_index(link)?;
         Some(self.bodies[self.link_frames[l].0])
     }
+
+    /// The name of the first link (in model order) that `body` carries: fixed joints merge
+    /// links into one body, so a body answers for its root-most link.
+    pub fn body_link(&self, body: RigidBodyHandle) -> Option<&str> {
+        let b = self.bodies.iter().position(|&h| h == body)?;
+        let l = self.link_frames.iter().position(|&(i, _)| i == b)?;
+        Some(&self.model.links[l].name)
+    }
 }

@@ -30,7 +30,7 @@ use crate::model::{Origin, RobotModel};
 use crate::robot::{JointDrive, JointSets, PdGains, Robot, RobotBuildOptions, groups};
 use crate::{assets, model::LoadOptions};
 use objects::{MeshCache, ObjectHandles};
-pub use objects::{PlacedShape, ShapeOwner};
+pub use objects::{PlacedShape, RobotContact, ShapeOwner};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::na::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -630,6 +630,20 @@ impl Scene {
         let q = (opening / 2.0).clamp(0.0, self.max_opening() / 2.0);
         self.robot
             .set_position_target(self.finger, q, self.world.joint_sets())
+    }
+
+    /// Sets the largest force (N) the finger drive squeezes with, kept until set again
+    /// (the scene starts with `gripper.force_limit`).
+    pub fn set_gripper_force_limit(&mut self, newtons: f32) -> Result<()> {
+        self.robot.set_effort_limit(self.finger, newtons)?;
+        let target = self.robot.position_targets()[self.finger];
+        self.robot
+            .set_position_target(self.finger, target, self.world.joint_sets())
+    }
+
+    /// The largest force (N) the finger drive squeezes with.
+    pub fn gripper_force_limit(&self) -> f32 {
+        self.robot.joints[self.finger].effort
     }
 
     /// Opens fully (`true`) or closes (`false`).

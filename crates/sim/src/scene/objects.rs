@@ -46,6 +46,20 @@ pub enum ShapeOwner {
     Bin(usize),
 }
 
+/// One robot body's contact with something outside the robot in the last physics step
+/// ([`Scene::robot_contacts`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotContact {
+    /// The robot link the touching body carries (its root-most link).
+    pub link: String,
+    /// The body is a finger (its pads are what grasps).
+    pub finger: bool,
+    pub other: ShapeOwner,
+    /// The force the other body exerted on the robot (N, world frame): the contact's normal
+    /// impulses over the step.
+    pub force: Vector3<f32>,
+}
+
 /// A collider shape at its world pose.
 #[derive(Clone)]
 pub struct PlacedShape {
@@ -501,6 +515,52 @@ impl Scene {
             }
         }
         peak / self.params.dt
+    }
+
+    /// Every contact between a robot body and an object, the table or a bin part in the last
+    /// physics step, with its force on the robot; pairs between robot links are left out.
+    pub fn robot_contacts(&self) -> Vec<RobotContact> {
+        let owner_of = |c: ColliderHandle| -> Option<ShapeOwner> {
+            if c == self.table_collider {
+                return Some(ShapeOwner::Table);
+            }
+            if let Some(i) = self.objects.iter().position(|o| o.collider == c) {
+                return Some(ShapeOwner::Object(i));
+            }
+            let body = self.world.colliders[c].parent()?;
+            let j = self.bin_bodies.iter().position(|&b| b == body)?;
+            Some(ShapeOwner::Bin(j))
+        };
+        let mut out = Vec::new();
+        for &body in &self.robot.bodies {
+            let link = self.robot.body_link(body).unwrap_or_default();
+            let finger = self.finger_bodies.contains(&body);
+            for &c in self.world.bodies[body].colliders() {
+                for pair in self.world.narrow_phase.contact_pairs_with(c) {
+                    // The manifolds' normals point from collider 1 to collider 2, and the
+                    // impulses push the two apart.
+                    let (other, sign) = if pair.collider1 == c {
+                        (pair.collider2, -1.0)
+                    } else {
+                        (pair.collider1, 1.0)
+                    };
+                    let Some(owner) = owner_of(other) else {
+                        continue;
+                    };
+                    let impulse: Vector3<f32> = pair.total_impulse().into();
+                    if impulse == Vector3::zeros() {
+                        continue;
+                    }
+                    out.push(RobotContact {
+                        link: link.to_string(),
+                        finger,
+                        other: owner,
+                        force: impulse * (sign / self.params.dt),
+                    });
+                }
+            }
+        }
+        out
     }
 
     fn colliders_of(&self, name: &str) -> Option<Vec<ColliderHandle>> {

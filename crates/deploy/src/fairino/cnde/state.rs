@@ -65,6 +65,7 @@ fn value_of<'a>(name: &str, state: &'a RobotState, payload_len: usize) -> FieldV
         "gripper_motion_done" => Int(state.gripper_motion_done.into()),
         "gripper_active" => Int(state.gripper_active.into()),
         "gripper_fault" => Int(state.gripper_fault.into()),
+        "gripper_current" => Int(state.gripper_current.into()),
         "collision_state" => Int(state.collision.into()),
         "robot_time" => match state.controller_clock_ms {
             Some(ms) => Ints(clock_fields(ms)),
@@ -182,6 +183,7 @@ fn store(state: &mut RobotState, name: &str, values: &[(f64, i64)]) {
         "gripper_motion_done" => state.gripper_motion_done = int != 0,
         "gripper_active" => state.gripper_active = int != 0,
         "gripper_fault" => state.gripper_fault = int as i32,
+        "gripper_current" => state.gripper_current = int as u8,
         "collision_state" => state.collision = int != 0,
         "robot_time" => state.controller_clock_ms = clock_ms(values),
         _ => {}
@@ -235,6 +237,7 @@ mod tests {
             gripper_motion_done: false,
             gripper_active: false,
             gripper_fault: 5,
+            gripper_current: 37,
             collision: true,
             controller_clock_ms: Some(((2 * 24 + 13) * 3600 + 7 * 60 + 9) * 1000 + 250),
         }
