@@ -4,8 +4,14 @@ use crate::error::{DeployError, Result};
 use std::io::Write;
 use std::path::Path;
 
-/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`.
-pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+/// Writes `bytes` to a temporary file beside `path` (named with `tag`), syncs it, and hands
+/// both paths to `place`, which puts it in place; the temporary file is removed if left.
+fn via_temporary(
+    path: &Path,
+    bytes: &[u8],
+    tag: &str,
+    place: impl FnOnce(&Path, &Path) -> std::io::Result<()>,
+) -> Result<std::io::Result<()>> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -14,7 +20,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         .file_name()
         .ok_or_else(|| DeployError::config(path.display().to_string(), "not a file path"))?;
     let tmp = dir.join(format!(
-        ".{}.tmp{}",
+        ".{}.{tag}{}",
         name.to_string_lossy(),
         std::process::id()
     ));
@@ -22,37 +28,25 @@ pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        place(&tmp, path)
     })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        DeployError::config(path.display().to_string(), format!("cannot write: {e}"))
-    })
+    let _ = std::fs::remove_file(&tmp);
+    Ok(result)
+}
+
+/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`.
+pub fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+    via_temporary(path, bytes, "tmp", |tmp, path| std::fs::rename(tmp, path))?
+        .map_err(|e| DeployError::config(path.display().to_string(), format!("cannot write: {e}")))
 }
 
 /// As [`write`], but never replaces a file: the complete temporary file is hard-linked to
 /// `path`, which fails if anything is there by then (no window between a check and the write).
 pub fn write_new(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| DeployError::config(path.display().to_string(), "not a file path"))?;
-    let tmp = dir.join(format!(
-        ".{}.new{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::hard_link(&tmp, path)
-    })();
-    let _ = std::fs::remove_file(&tmp);
-    result.map_err(|e| {
+    via_temporary(path, bytes, "new", |tmp, path| {
+        std::fs::hard_link(tmp, path)
+    })?
+    .map_err(|e| {
         let message = if e.kind() == std::io::ErrorKind::AlreadyExists {
             "exists already; it is kept (give another path, or move it away)".to_string()
         } else {
