@@ -46,6 +46,10 @@ pub struct RobotState {
     /// month), when the stream carries it: a clock that stops while frames keep coming means
     /// they carry old data.
     pub controller_clock_ms: Option<i64>,
+    /// The last ServoJ target the controller received (`last_servoJ_target`, deg), when the
+    /// stream carries it: it tells when a set point reached the controller, on its clock.
+    #[serde(default)]
+    pub last_servo_target_deg: Option<[f64; 6]>,
 }
 
 impl Default for RobotState {
@@ -69,6 +73,7 @@ impl Default for RobotState {
             gripper_current: 0,
             collision: false,
             controller_clock_ms: None,
+            last_servo_target_deg: None,
         }
     }
 }

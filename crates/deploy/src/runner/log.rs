@@ -50,7 +50,8 @@ enum Event {
     },
     State {
         sequence: u64,
-        state: RobotState,
+        // Boxed: the queue's messages stay the size of the others.
+        state: Box<RobotState>,
     },
     Step {
         episode: u32,
@@ -187,7 +188,7 @@ impl JsonLog {
     pub fn state(&self, sequence: u64, state: &RobotState) {
         self.queue(|| Event::State {
             sequence,
-            state: state.clone(),
+            state: Box::new(state.clone()),
         });
     }
 

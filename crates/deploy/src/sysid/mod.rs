@@ -43,6 +43,7 @@ pub fn identify(recording: &Recording, sim: &ArmSim) -> Result<DriveModel> {
             "the recording excited no joint",
         ));
     }
+    let recording = &recording.aligned();
     let times = recording.state_times();
     let plain = sim.replay(recording, &TrackingModel::default())?;
     let mut tracking = TrackingModel::default();

@@ -23,6 +23,11 @@ const TAIL_S: f64 = 0.3;
 const GRIPPER_TIMEOUT_S: f64 = 8.0;
 /// The gripper has ended its move once its reported position has not changed for this long (s).
 const GRIPPER_STILL_S: f64 = 0.4;
+/// A set point is looked for in the states from this long before its call to this long after
+/// its reply, by the rough clock offset (s): far wider than that offset's error, far shorter
+/// than the time a set point takes to come back (a step and back lasts 0.5 s).
+const SEARCH_BEFORE_S: f64 = 0.05;
+const SEARCH_AFTER_S: f64 = 0.1;
 /// Stopping further open than this (%) with nothing between the fingers is a stall.
 const STALL_PERCENT: f64 = 3.0;
 
@@ -31,6 +36,9 @@ const STALL_PERCENT: f64 = 3.0;
 pub struct SentSetPoint {
     /// When it reached the controller (s from the recording's start): halfway through the call.
     pub t: f64,
+    /// When the call began and when its reply came (s): it reached the controller between.
+    pub sent: f64,
+    pub replied: f64,
     pub joints_deg: [f64; 6],
     pub cmd_t: f64,
 }
@@ -43,6 +51,9 @@ pub struct RecordedState {
     /// The controller's clock in it (ms), when the stream carries one.
     pub clock_ms: Option<i64>,
     pub joints_deg: [f64; 6],
+    /// The last ServoJ target the controller had received by its clock, when the stream
+    /// carries it.
+    pub servo_target: Option<[f64; 6]>,
 }
 
 /// What the excitation did.
@@ -72,6 +83,7 @@ impl Recording {
             states: (self.states.iter())
                 .map(|s| RecordedState {
                     joints_deg: f(&s.joints_deg),
+                    servo_target: s.servo_target.as_ref().map(&f),
                     ..s.clone()
                 })
                 .collect(),
@@ -79,26 +91,141 @@ impl Recording {
         }
     }
 
-    /// When each state was taken, on the recording's clock (s). With the controller's clock
-    /// in the stream: that clock, moved by the smallest gap between arrival and clock seen (a
-    /// frame sent at once), plus half the clock's millisecond (its rounding), so a frame's
-    /// wait in the controller before sending does not count as the arm's delay. Without it,
-    /// or if that clock steps back: the arrival times.
+    /// When each state was taken, on the recording's clock (s): the controller's clock moved
+    /// by its offset from ours ([`Recording::clock_offset`]). Without the controller's clock,
+    /// or if it steps back: the arrival times.
     pub fn state_times(&self) -> Vec<f64> {
-        let clocks: Option<Vec<i64>> = self.states.iter().map(|s| s.clock_ms).collect();
-        let monotonic = clocks
-            .as_ref()
-            .is_some_and(|c| c.windows(2).all(|w| w[1] >= w[0]) && !c.is_empty());
-        match clocks {
-            Some(clocks) if monotonic => {
-                let offset = (self.states.iter().zip(&clocks))
-                    .map(|(s, &c)| s.received - c as f64 / 1e3)
-                    .fold(f64::INFINITY, f64::min)
-                    + 0.0005;
-                clocks.iter().map(|&c| c as f64 / 1e3 + offset).collect()
-            }
-            _ => self.states.iter().map(|s| s.received).collect(),
+        match self.clock_offset() {
+            Some((offset, clocks)) => clocks.iter().map(|&c| c as f64 / 1e3 + offset).collect(),
+            None => self.states.iter().map(|s| s.received).collect(),
         }
+    }
+
+    /// Our clock minus the controller's (s), with the controller's clock of each state (ms).
+    ///
+    /// With `last_servoJ_target` in the stream, each new set point reached the controller
+    /// after the clock of the last state without it and by the clock of the first with it,
+    /// and on our clock between its call and the reply: each set point bounds the offset from
+    /// both sides, and the offset is the middle of what all of them allow. Otherwise: the
+    /// smallest gap between a state's arrival and its clock (a frame sent at once), which
+    /// also counts the frame's time on its way; that bias reads as the arm's delay.
+    pub fn clock_offset(&self) -> Option<(f64, Vec<i64>)> {
+        let clocks = self.clocks()?;
+        let offset = match self.arrivals(&clocks) {
+            Some(arrivals) => arrivals.offset(),
+            None => self.earliest_gap(&clocks),
+        };
+        Some((offset, clocks))
+    }
+
+    /// The recording with each set point's time (`t`) narrowed, where a state showed it
+    /// arrive, to what both clocks allow, and kept in order between those; unchanged without
+    /// `last_servoJ_target`. Halfway through the call is late by however long this process
+    /// waited for the reply, which a loaded host stretches to milliseconds.
+    pub fn aligned(&self) -> Self {
+        let mut out = self.clone();
+        let Some(arrivals) = self.clocks().and_then(|c| self.arrivals(&c)) else {
+            return out;
+        };
+        let offset = arrivals.offset();
+        for &(k, after_ms, by_ms) in &arrivals.seen {
+            let c = &mut out.commands[k];
+            let from = c.sent.max(after_ms as f64 / 1e3 - 0.0005 + offset);
+            let to = c.replied.min(by_ms as f64 / 1e3 + 0.0005 + offset);
+            if from <= to {
+                c.t = 0.5 * (from + to);
+            }
+        }
+        // The others in order between their neighbours.
+        let mut seen = arrivals.seen.iter().map(|a| a.0).peekable();
+        let mut floor = f64::NEG_INFINITY;
+        for k in 0..out.commands.len() {
+            if seen.peek() == Some(&k) {
+                seen.next();
+                floor = out.commands[k].t;
+                continue;
+            }
+            let ceiling = seen.peek().map_or(f64::INFINITY, |&n| out.commands[n].t);
+            let c = &mut out.commands[k];
+            c.t = c.t.clamp(floor, ceiling.max(floor));
+            floor = c.t;
+        }
+        out
+    }
+
+    fn clocks(&self) -> Option<Vec<i64>> {
+        let clocks: Vec<i64> = self
+            .states
+            .iter()
+            .map(|s| s.clock_ms)
+            .collect::<Option<_>>()?;
+        (!clocks.is_empty() && clocks.windows(2).all(|w| w[1] >= w[0])).then_some(clocks)
+    }
+
+    /// The smallest gap between a state's arrival and its clock (s), plus half the clock's
+    /// millisecond.
+    fn earliest_gap(&self, clocks: &[i64]) -> f64 {
+        (self.states.iter().zip(clocks))
+            .map(|(s, &c)| s.received - c as f64 / 1e3)
+            .fold(f64::INFINITY, f64::min)
+            + 0.0005
+    }
+
+    /// The set points seen arriving in `last_servoJ_target`, and the offset's bounds they
+    /// give, each widened by half the clock's millisecond. Each set point is looked for in
+    /// the states that the earliest gap (an offset a few ms off) puts near its call.
+    fn arrivals(&self, clocks: &[i64]) -> Option<Arrivals> {
+        let targets: Vec<[f64; 6]> = (self.states.iter())
+            .map(|s| s.servo_target)
+            .collect::<Option<_>>()?;
+        let rough = self.earliest_gap(clocks);
+        let times: Vec<f64> = clocks.iter().map(|&c| c as f64 / 1e3 + rough).collect();
+        let same = |a: &[f64; 6], b: &[f64; 6]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+        let mut arrivals = Arrivals {
+            low: f64::NEG_INFINITY,
+            high: f64::INFINITY,
+            seen: Vec::new(),
+        };
+        let mut previous: Option<&[f64; 6]> = None;
+        for (k, command) in self.commands.iter().enumerate() {
+            let new = previous.is_none_or(|p| !same(p, &command.joints_deg));
+            previous = Some(&command.joints_deg);
+            if !new {
+                continue;
+            }
+            let from = times
+                .partition_point(|&t| t < command.sent - SEARCH_BEFORE_S)
+                .max(1);
+            let to = times.partition_point(|&t| t <= command.replied + SEARCH_AFTER_S);
+            let first_showing = (from..to).find(|&i| {
+                same(&targets[i], &command.joints_deg)
+                    && !same(&targets[i - 1], &command.joints_deg)
+            });
+            if let Some(i) = first_showing {
+                let (after, by) = (clocks[i - 1], clocks[i]);
+                arrivals.low = arrivals.low.max(command.sent - by as f64 / 1e3 - 0.0005);
+                arrivals.high = arrivals
+                    .high
+                    .min(command.replied - after as f64 / 1e3 + 0.0005);
+                arrivals.seen.push((k, after, by));
+            }
+        }
+        (!arrivals.seen.is_empty()).then_some(arrivals)
+    }
+}
+
+/// Set points seen arriving at the controller.
+struct Arrivals {
+    /// Bounds on our clock minus the controller's (s).
+    low: f64,
+    high: f64,
+    /// Each seen set point's index, and the controller's clocks (ms) it arrived after and by.
+    seen: Vec<(usize, i64, i64)>,
+}
+
+impl Arrivals {
+    fn offset(&self) -> f64 {
+        0.5 * (self.low + self.high)
     }
 }
 
@@ -264,6 +391,7 @@ impl Run<'_> {
                 received: self.secs(s.received_at),
                 clock_ms: s.state.controller_clock_ms,
                 joints_deg: s.state.joints_deg,
+                servo_target: s.state.last_servo_target_deg,
             });
         }
         Ok(s)
@@ -339,10 +467,11 @@ impl Run<'_> {
         let cmd_t = cmd_t.min(MAX_CMD_T);
         let before = self.link.now();
         self.send(&RobotCommand::ServoJ { joints_deg, cmd_t })?;
-        let after = self.link.now();
-        let t = 0.5 * (self.secs(before) + self.secs(after));
+        let (sent, replied) = (self.secs(before), self.secs(self.link.now()));
         self.recording.commands.push(SentSetPoint {
-            t,
+            t: 0.5 * (sent + replied),
+            sent,
+            replied,
             joints_deg,
             cmd_t,
         });
@@ -424,5 +553,64 @@ impl Run<'_> {
             }
             self.link.sleep_until(now + POLL);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A recording on our clock where the controller's clock is `offset` behind: set points
+    /// every 8 ms arriving 1 ms into a 3 ms call, frames every 8 ms (phase 3 ms) each on its
+    /// way 2-5 ms.
+    fn recording(offset: f64, with_targets: bool) -> Recording {
+        let mut r = Recording::default();
+        let target = |k: usize| [k as f64 * 0.01, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let arrivals: Vec<f64> = (0..200).map(|k| 0.1 + k as f64 * 0.008 + 0.001).collect();
+        for (k, &a) in arrivals.iter().enumerate() {
+            r.commands.push(SentSetPoint {
+                t: a + 0.0005,
+                sent: a - 0.001,
+                replied: a + 0.002,
+                joints_deg: target(k),
+                cmd_t: 0.008,
+            });
+        }
+        for i in 0..200 {
+            let taken = 0.1 + i as f64 * 0.0083 + 0.003;
+            let shown = arrivals.iter().rposition(|&a| a <= taken);
+            r.states.push(RecordedState {
+                received: taken + 0.002 + 0.003 * ((i * 7 % 11) as f64 / 10.0),
+                clock_ms: Some(((taken - offset) * 1e3).round() as i64),
+                joints_deg: [0.0; 6],
+                servo_target: with_targets.then(|| shown.map_or([9.0; 6], target)),
+            });
+        }
+        r
+    }
+
+    #[test]
+    fn set_points_seen_arriving_align_the_clocks() {
+        let offset = 12.345;
+        let (found, _) = recording(offset, true).clock_offset().unwrap();
+        assert!((found - offset).abs() < 0.0006, "{found} s, not {offset} s");
+        // Without the targets, the frames' time on their way (2 ms at least) reads as an
+        // offset, and so as the arm's delay.
+        let (rough, _) = recording(offset, false).clock_offset().unwrap();
+        assert!(rough - offset > 0.0015, "{rough} s");
+    }
+
+    #[test]
+    fn aligned_set_points_keep_within_their_calls_and_in_order() {
+        let r = recording(-3.0, true);
+        let aligned = r.aligned();
+        for (a, c) in aligned.commands.iter().zip(&r.commands) {
+            assert!(c.sent <= a.t && a.t <= c.replied, "{a:?} outside {c:?}");
+            assert!((a.t - (c.sent + 0.001)).abs() < 0.0016, "{a:?} for {c:?}");
+        }
+        assert!(aligned.commands.windows(2).all(|w| w[0].t <= w[1].t));
+        // Without the targets nothing moves.
+        let plain = recording(-3.0, false);
+        assert_eq!(plain.aligned(), plain);
     }
 }

@@ -230,6 +230,9 @@ struct ActiveMove {
 
 /// Outcomes kept for waiting callers; older ones are forgotten.
 const OUTCOMES_KEPT: usize = 256;
+/// ServoJ targets kept for the state's `last_servoJ_target`: many more than arrive between
+/// two measurements.
+const SERVO_TARGETS_KEPT: usize = 16;
 
 /// The controller (see the [module](self) documentation).
 #[derive(Clone, Debug)]
@@ -256,6 +259,11 @@ pub struct Controller {
     servo_step: Option<ServoStep>,
     /// The last target of the servo session, what the next step is measured from.
     servo_reference: Option<Joints>,
+    /// The ServoJ targets accepted lately with when (s), for the state's `last_servoJ_target`:
+    /// a state reports the last one accepted by its own clock.
+    servo_targets: VecDeque<(f64, Joints)>,
+    /// The target accepted before the oldest of `servo_targets`.
+    servo_target_before: Joints,
     next_ticket: u64,
     outcomes: VecDeque<(u64, i32)>,
     measured: Measured,
@@ -319,6 +327,8 @@ impl Controller {
             servo_session: false,
             servo_step: None,
             servo_reference: None,
+            servo_targets: VecDeque::new(),
+            servo_target_before: [0.0; 6],
             next_ticket: 1,
             outcomes: VecDeque::new(),
             measured: Measured {
@@ -633,6 +643,12 @@ impl Controller {
             return codes::SERVOJ_OVER_LIMIT;
         }
         self.servo_reference = Some(target);
+        self.servo_targets.push_back((now, target));
+        while self.servo_targets.len() > SERVO_TARGETS_KEPT {
+            if let Some((_, old)) = self.servo_targets.pop_front() {
+                self.servo_target_before = old;
+            }
+        }
         self.servo_step = Some(ServoStep {
             from: self.setpoint,
             to: target,
@@ -945,7 +961,15 @@ impl Controller {
             gripper_current: self.gripper.current_percent().round() as u8,
             collision: self.collision,
             controller_clock_ms: Some((self.measured_at * 1000.0).round() as i64),
+            last_servo_target_deg: Some(self.last_servo_target()),
         }
+    }
+
+    /// The last ServoJ target accepted by the time of the latest measurement.
+    fn last_servo_target(&self) -> Joints {
+        (self.servo_targets.iter().rev())
+            .find(|(at, _)| *at <= self.measured_at)
+            .map_or(self.servo_target_before, |(_, target)| *target)
     }
 
     /// The state the controller reports.

@@ -11,7 +11,7 @@
 //! with encoder noise, and the pose feed one every feed period.
 
 use super::controller::{Controller, ControllerConfig, StartState, codes};
-use super::faults::gaussian;
+use super::faults::{TrackingModel, gaussian};
 use super::world::World;
 use crate::error::{DeployError, Result};
 use crate::fairino::error_codes::error_code_meaning;
@@ -270,6 +270,12 @@ impl SimulatedController {
             controller: self.clone(),
             seed,
         }
+    }
+
+    /// Makes the drives follow their set points through `tracking` (the twin's `tracking`
+    /// fault).
+    pub fn set_tracking(&self, tracking: TrackingModel) {
+        self.inner().controller.set_tracking(tracking);
     }
 
     /// Simulated seconds so far.

@@ -71,6 +71,10 @@ fn value_of<'a>(name: &str, state: &'a RobotState, payload_len: usize) -> FieldV
             Some(ms) => Ints(clock_fields(ms)),
             None => Zero,
         },
+        "last_servoJ_target" => match &state.last_servo_target_deg {
+            Some(target) => Floats(target),
+            None => Zero,
+        },
         _ => Zero,
     }
 }
@@ -186,6 +190,11 @@ fn store(state: &mut RobotState, name: &str, values: &[(f64, i64)]) {
         "gripper_current" => state.gripper_current = int as u8,
         "collision_state" => state.collision = int != 0,
         "robot_time" => state.controller_clock_ms = clock_ms(values),
+        "last_servoJ_target" => {
+            let mut target = [0.0; 6];
+            floats(&mut target);
+            state.last_servo_target_deg = Some(target);
+        }
         _ => {}
     }
 }
@@ -240,6 +249,7 @@ mod tests {
             gripper_current: 37,
             collision: true,
             controller_clock_ms: Some(((2 * 24 + 13) * 3600 + 7 * 60 + 9) * 1000 + 250),
+            last_servo_target_deg: Some([11.0, -89.5, 45.0, 1.5, 2.5, 3.5]),
         }
     }
 
@@ -265,8 +275,12 @@ mod tests {
         assert_eq!((payload[577], payload[578]), (0, 1), "safety stops");
         assert_eq!(payload[588], 42, "gripper_position");
         assert_eq!(&payload[810..814], &0i32.to_le_bytes(), "rbt_enable_state");
-        // Not carried by RobotState: zeros.
-        assert!(payload[1270..1318].iter().all(|&b| b == 0));
+        assert_eq!(
+            &payload[1270..1278],
+            &11.0f64.to_le_bytes(),
+            "last_servoJ_target"
+        );
+        assert_eq!(&payload[1310..1318], &3.5f64.to_le_bytes());
     }
 
     #[test]
