@@ -38,9 +38,31 @@ pub struct TrainArgs {
     /// Override a setting: `--set ppo.learning_rate=1e-4 --set env.task.max_episode_steps=80`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub overrides: Vec<String>,
+    /// Train through the arm's drives as `fairgrasp sysid` identified them: each joint's delay
+    /// and lag from the file become `[env.control.drives]` (needs `[env.control.servo]`; set
+    /// `env.control.drives.scale` to randomise around them).
+    #[arg(long, value_name = "SYSID.toml", conflicts_with = "resume")]
+    pub drives: Option<PathBuf>,
     /// No progress bar (for logs); one line per evaluation instead.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// The settings that train through the drives in a `fairgrasp sysid` file, and the env id they
+/// were fitted against.
+fn drive_overrides(path: &std::path::Path) -> Result<(Vec<String>, String)> {
+    let model = fairgrasp_deploy::sysid::DriveModel::load(path)?;
+    let tracking = model.tracking();
+    let list = |f: fn(&fairgrasp_deploy::twin::faults::JointTracking) -> f64| {
+        let values: Vec<String> = tracking.iter().map(|t| format!("{:?}", f(t))).collect();
+        format!("[{}]", values.join(", "))
+    };
+    let overrides = vec![
+        "env.control.drives.enabled=true".to_string(),
+        format!("env.control.drives.delay_ms={}", list(|t| t.delay_ms)),
+        format!("env.control.drives.tau_ms={}", list(|t| t.tau_ms)),
+    ];
+    Ok((overrides, model.env))
 }
 
 pub fn run(args: &TrainArgs) -> Result<()> {
@@ -66,6 +88,15 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         fairgrasp_env::registry::spec(env)?;
         overrides.push(format!("env_id=\"{env}\""));
     }
+    let fitted_on = match &args.drives {
+        Some(path) => {
+            let (more, env) = drive_overrides(path)?;
+            println!("drives from {}: {}", path.display(), more[1..].join(", "));
+            overrides.extend(more);
+            Some(env)
+        }
+        None => None,
+    };
     let (text, origin) = match &args.config {
         Some(path) => (
             std::fs::read_to_string(path)
@@ -80,6 +111,14 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         }
     };
     let config = TrainConfig::from_toml_str(&text, &overrides).context(origin)?;
+    if let Some(env) = fitted_on
+        && env != config.env_id
+    {
+        bail!(
+            "--drives: the file's drives were fitted against {env}'s simulated arm, not {}'s",
+            config.env_id
+        );
+    }
     let run_dir = match &args.run_dir {
         Some(dir) => {
             if holds_a_run(dir) {

@@ -804,3 +804,57 @@ impl Drop for KillOnDrop {
         self.kill();
     }
 }
+
+#[test]
+fn training_through_identified_drives_keeps_them_in_the_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let sysid = dir.path().join("sysid.toml");
+    std::fs::write(
+        &sysid,
+        "env = \"FaArmGrasp-v0\"\n[[joints]]\njoint = 1\ndelay_ms = 8.1\ntau_ms = 15.2\n\
+         rms_residual_deg = 0.01\nsamples = 500\n[[joints]]\njoint = 3\ndelay_ms = 7.5\n\
+         tau_ms = 14.0\nrms_residual_deg = 0.01\nsamples = 500\n",
+    )
+    .unwrap();
+    let config = dir.path().join("tiny.toml");
+    let servo = format!("{TINY_TRAIN_TOML}[env.control.servo]\nenabled = true\n");
+    std::fs::write(&config, servo).unwrap();
+    let run = dir.path().join("run");
+    let train = |extra: &[&str]| {
+        let mut args = vec!["train", "--quiet", "--total-timesteps", "256", "--config"];
+        args.push(config.to_str().unwrap());
+        args.extend_from_slice(extra);
+        fairgrasp(&args)
+    };
+    let out = train(&[
+        "--drives",
+        sysid.to_str().unwrap(),
+        "--run-dir",
+        run.to_str().unwrap(),
+    ]);
+    let (_, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("final/model.json")).unwrap())
+            .unwrap();
+    let drives = &model["env"]["control"]["drives"];
+    assert_eq!(drives["enabled"], true, "{model}");
+    assert_eq!(
+        drives["delay_ms"],
+        serde_json::json!([8.1, 0.0, 7.5, 0.0, 0.0, 0.0])
+    );
+    assert_eq!(
+        drives["tau_ms"],
+        serde_json::json!([15.2, 0.0, 14.0, 0.0, 0.0, 0.0])
+    );
+    // A file fitted against another env's arm, or not a sysid file, is refused by name.
+    let other = dir.path().join("other.toml");
+    let text_other = std::fs::read_to_string(&sysid)
+        .unwrap()
+        .replace("FaArmGrasp-v0", "FaArmPickPlace-v0");
+    std::fs::write(&other, text_other).unwrap();
+    let (_, stderr) = text(&train(&["--drives", other.to_str().unwrap()]));
+    assert!(stderr.contains("FaArmPickPlace-v0"), "{stderr}");
+    let (_, stderr) = text(&train(&["--drives", config.to_str().unwrap()]));
+    assert!(stderr.contains("tiny.toml"), "{stderr}");
+}

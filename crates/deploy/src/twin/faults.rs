@@ -40,13 +40,7 @@ use crate::fairino::cnde::FrameFate;
 use std::fmt;
 use std::time::Duration;
 
-/// One joint drive's tracking: the set point reaches the motor after a pure delay, then
-/// through a first-order lag.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct JointTracking {
-    pub delay_ms: f64,
-    pub tau_ms: f64,
-}
+pub use fairgrasp_sim::control::JointTracking;
 
 /// The six drives' tracking, j1 first; all zero: the drives are the set point.
 pub type TrackingModel = [JointTracking; 6];

@@ -2,9 +2,6 @@
 //! set-point interpolation of a `ServoJ` stream, the braking of a stopped motion and the
 //! drives' tracking of their set points. Degrees and seconds throughout.
 
-use super::faults::TrackingModel;
-use std::collections::VecDeque;
-
 /// Six joint values (deg, deg/s or deg/s²).
 pub type Joints = [f64; 6];
 
@@ -123,85 +120,8 @@ impl Brake {
     }
 }
 
-/// History kept beyond the longest delay (s).
-const DRIVE_HISTORY_MARGIN: f64 = 0.05;
-
-/// The drives between the controller's set point and the joints: each joint's set point
-/// arrives after a pure delay and is followed through a first-order lag.
-#[derive(Clone, Debug)]
-pub struct Drives {
-    /// The controller's set points by time, for the delay.
-    history: VecDeque<(f64, Joints)>,
-    output: Joints,
-    time: f64,
-}
-
-impl Drives {
-    /// Drives at rest at `q` at time `now`.
-    pub fn new(q: Joints, now: f64) -> Self {
-        Self {
-            history: VecDeque::from([(now, q)]),
-            output: q,
-            time: now,
-        }
-    }
-
-    /// The drives' set points at `now`, given the controller's set point `command` at `at`.
-    pub fn follow(&mut self, model: &TrackingModel, at: f64, command: Joints, now: f64) -> Joints {
-        if self.history.back().is_none_or(|(t, _)| at > *t) {
-            self.history.push_back((at, command));
-        }
-        if *model == TrackingModel::default() {
-            self.history.clear();
-            self.history.push_back((at, command));
-            self.output = command;
-            self.time = self.time.max(now);
-            return command;
-        }
-        let dt = now - self.time;
-        if dt > 0.0 {
-            for (j, drive) in model.iter().enumerate() {
-                let delay = drive.delay_ms / 1e3;
-                let u0 = self.at(self.time - delay)[j];
-                let u1 = self.at(now - delay)[j];
-                let tau = drive.tau_ms / 1e3;
-                // Exact over the step for an input linear between its ends.
-                self.output[j] = if tau > 0.0 {
-                    let slope = (u1 - u0) / dt;
-                    let decay = (-dt / tau).exp();
-                    u1 - slope * tau + (self.output[j] - u0 + slope * tau) * decay
-                } else {
-                    u1
-                };
-            }
-            self.time = now;
-            let longest = model.iter().fold(0.0_f64, |m, t| m.max(t.delay_ms / 1e3));
-            let keep_from = now - longest - DRIVE_HISTORY_MARGIN;
-            while self.history.len() > 2 && self.history[1].0 < keep_from {
-                self.history.pop_front();
-            }
-        }
-        self.output
-    }
-
-    /// The controller's set point at time `t`, linear between the ones recorded.
-    fn at(&self, t: f64) -> Joints {
-        let Some(&(first_t, first)) = self.history.front() else {
-            return self.output;
-        };
-        if t <= first_t {
-            return first;
-        }
-        for pair in self.history.iter().zip(self.history.iter().skip(1)) {
-            let ((t0, q0), (t1, q1)) = pair;
-            if t <= *t1 {
-                let s = (t - t0) / (t1 - t0);
-                return std::array::from_fn(|j| q0[j] + (q1[j] - q0[j]) * s);
-            }
-        }
-        self.history.back().map_or(self.output, |(_, q)| *q)
-    }
-}
+/// The drives between the controller's set point and the joints.
+pub type Drives = fairgrasp_sim::control::DriveFilter<6>;
 
 /// `next` moved towards no further from `previous` than `max_speed × dt` on each joint: the
 /// controller's own joint speed limit on streamed set points.

@@ -6,6 +6,7 @@
 //! within a few steps of the measured joints (the lead cap) and the joint limits; Cartesian mode
 //! also keeps the commanded TCP inside a workspace box.
 
+use crate::arm::drives::DrivesConfig;
 use crate::arm::gripper::GripperConfig;
 use crate::arm::servo::ServoConfig;
 use crate::arm::state::ArmState;
@@ -50,6 +51,9 @@ pub struct ControlConfig {
     /// The gripper's controller: the fingers move through its set point
     /// ([`crate::arm::gripper`]).
     pub gripper: GripperConfig,
+    /// The arm's drives between the servo set points and the joints: a delay and a lag per
+    /// joint, as `fairgrasp sysid` identifies them ([`crate::arm::drives`]).
+    pub drives: DrivesConfig,
     /// The deployment's speed scales the policy will run at, one drawn per episode (no draw
     /// for one value). At scale s a control step lasts its period over s of simulated time
     /// (physics substeps ÷ s) with the servo caps, the gripper's speed and the reported speeds
@@ -80,6 +84,7 @@ impl Default for ControlConfig {
             workspace_max: [0.85, 0.35, 0.45],
             servo: ServoConfig::default(),
             gripper: GripperConfig::default(),
+            drives: DrivesConfig::default(),
             speed_scales: vec![1.0],
             collision_force_limit: None,
         }
@@ -103,6 +108,7 @@ impl ControlConfig {
         positive("control.max_yaw_delta", self.max_yaw_delta, 0.5)?;
         positive("control.lead_steps", self.lead_steps, 20.0)?;
         self.gripper.validate()?;
+        self.drives.validate(self.servo.enabled)?;
         let scales = &self.speed_scales;
         if scales.is_empty() || scales.len() > 16 {
             return Err(EnvError::config(

@@ -6,6 +6,7 @@
 //! - [`state`]: [`ArmState`], the plain state observations are computed from;
 //! - [`control`]: [`ActionMapper`], action → joint targets;
 //! - [`servo`]: [`JointRamp`], joint targets → capped set points (the deployment's motion);
+//! - [`drives`]: [`ArmDrives`], set points → the joints' targets through the arm's drives;
 //! - [`readings`]: [`StateEstimator`], controller readings → the policy's state (the
 //!   deployment's observation);
 //! - [`observation`]: [`ObsWriter`] and noise groups;
@@ -13,6 +14,7 @@
 
 pub mod config;
 pub mod control;
+pub mod drives;
 pub mod erased;
 pub mod gripper;
 pub mod observation;
@@ -25,6 +27,7 @@ pub use config::{
     TaskSettings,
 };
 pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
+pub use drives::{ArmDrives, DrivesConfig};
 pub use erased::{ArmTaskEnv, ArmWorld, SuccessJudge};
 pub use gripper::{GripperConfig, GripperDrive};
 pub use observation::{NoiseGroup, ObsWriter};
@@ -124,6 +127,8 @@ struct Episode {
     ramp: Option<JointRamp>,
     /// The gripper's set point, when `[control.gripper]` is on.
     gripper: Option<GripperDrive>,
+    /// The arm's drives, when `[control.drives]` is on.
+    drives: Option<ArmDrives>,
     /// This episode's speed scale (`control.speed_scales`) and the physics substeps of one
     /// control step at it.
     speed_scale: f32,
@@ -614,6 +619,16 @@ impl<T: Task> Env for ArmEnv<T> {
         let no_op = self.no_op_action();
         let ramp = self.config.control.servo.ramp(&self.scene, speed_scale);
         let gripper = (self.config.control.gripper).drive(&self.scene, speed_scale, &mut self.rng);
+        let drives = match (self.config.control.drives).drives(&self.scene, &mut self.rng)? {
+            Some((drives, scale)) => {
+                let [lo, hi] = self.config.control.drives.scale;
+                if lo < hi {
+                    params.set("param/drive_scale", scale as f32);
+                }
+                Some(drives)
+            }
+            None => None,
+        };
         self.episode = Some(Episode {
             steps: 0,
             done: false,
@@ -625,6 +640,7 @@ impl<T: Task> Env for ArmEnv<T> {
             last_obs: obs.clone(),
             ramp,
             gripper,
+            drives,
             speed_scale,
             substeps,
             estimator,
@@ -718,7 +734,16 @@ impl<T: Task> Env for ArmEnv<T> {
             }),
             Some(ramp) => {
                 let (scene, target) = (&mut self.scene, &physical);
-                servo::step_servoed(scene, ramp, substeps, target, drive_gripper, read_early)
+                let drives = episode.drives.as_mut();
+                servo::step_servoed(
+                    scene,
+                    ramp,
+                    drives,
+                    substeps,
+                    target,
+                    drive_gripper,
+                    read_early,
+                )
             }
         };
         match stepped {

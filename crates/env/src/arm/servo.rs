@@ -3,6 +3,7 @@
 //! servo period, as the deployment's safety filter does on the real arm, so a policy meets on
 //! the robot the motion it learnt on.
 
+use crate::arm::drives::ArmDrives;
 use fairgrasp_sim::SimError;
 pub use fairgrasp_sim::control::JointRamp;
 use fairgrasp_sim::scene::Scene;
@@ -69,30 +70,40 @@ pub fn servo_ticks(control_period: f32, period_ms: f32) -> u32 {
 }
 
 /// One control step of `substeps` physics steps through the servo ramp: a set point every
-/// servo period, each held by the drives for that period's share of the substeps.
-/// `before_substep` may drive the scene before each physics substep; `after_substep` sees it
-/// after, with the count done.
+/// servo period, each held by the joints for that period's share of the substeps, or taken
+/// by the arm's `drives` when given. `before_substep` may drive the scene before each physics
+/// substep; `after_substep` sees it after, with the count done.
 pub(crate) fn step_servoed(
     scene: &mut Scene,
     ramp: &mut JointRamp,
+    mut drives: Option<&mut ArmDrives>,
     substeps: u32,
     target: &[f32],
     mut before_substep: impl FnMut(&mut Scene) -> std::result::Result<(), SimError>,
     mut after_substep: impl FnMut(&Scene, u32),
 ) -> std::result::Result<(), SimError> {
     let period = scene.dt() * substeps as f32;
-    let ticks = servo_ticks(period, ramp.caps().2 as f32 * 1000.0)
+    let servo_period = ramp.caps().2;
+    let ticks = servo_ticks(period, servo_period as f32 * 1000.0)
         .min(substeps)
         .max(1);
     let target: Vec<f64> = target.iter().map(|&v| v as f64).collect();
     let mut done = 0;
     for k in 1..=ticks {
         let set_point = ramp.next(&target).expect("the ramp starts at reset");
-        let q: Vec<f32> = set_point.iter().map(|&v| v as f32).collect();
-        scene.set_arm_targets(&q)?;
+        match drives.as_deref_mut() {
+            Some(d) => d.command(&set_point, servo_period),
+            None => {
+                let q: Vec<f32> = set_point.iter().map(|&v| v as f32).collect();
+                scene.set_arm_targets(&q)?;
+            }
+        }
         // Spread the substeps over the ticks (8 over 4: two each).
         let until = substeps * k / ticks;
         while done < until {
+            if let Some(d) = drives.as_deref_mut() {
+                d.drive(scene)?;
+            }
             before_substep(scene)?;
             scene.step_physics()?;
             done += 1;

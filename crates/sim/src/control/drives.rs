@@ -1,0 +1,135 @@
+//! The drives between a controller's set point and the joints: each joint's set point arrives
+//! after a pure delay and is followed through a first-order lag. The twin's controller model
+//! and training's `[control.drives]` both drive their joints through it, with the delays and
+//! lags `fairgrasp sysid` identifies on the arm.
+
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// One joint drive's tracking: the set point reaches the motor after a pure delay, then
+/// through a first-order lag of time constant `tau_ms`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct JointTracking {
+    pub delay_ms: f64,
+    pub tau_ms: f64,
+}
+
+/// History kept beyond the longest delay (s).
+const HISTORY_MARGIN: f64 = 0.05;
+
+/// `N` drives following their set points (any unit; seconds).
+#[derive(Clone, Debug)]
+pub struct DriveFilter<const N: usize> {
+    /// The controller's set points by time, for the delay.
+    history: VecDeque<(f64, [f64; N])>,
+    output: [f64; N],
+    time: f64,
+}
+
+impl<const N: usize> DriveFilter<N> {
+    /// Drives at rest at `q` at time `now`.
+    pub fn new(q: [f64; N], now: f64) -> Self {
+        Self {
+            history: VecDeque::from([(now, q)]),
+            output: q,
+            time: now,
+        }
+    }
+
+    /// The drives' set points at `now`, given the controller's set point `command` at `at`
+    /// (linear between the set points given).
+    pub fn follow(
+        &mut self,
+        model: &[JointTracking; N],
+        at: f64,
+        command: [f64; N],
+        now: f64,
+    ) -> [f64; N] {
+        if self.history.back().is_none_or(|(t, _)| at > *t) {
+            self.history.push_back((at, command));
+        }
+        if model.iter().all(|d| *d == JointTracking::default()) {
+            self.history.clear();
+            self.history.push_back((at, command));
+            self.output = command;
+            self.time = self.time.max(now);
+            return command;
+        }
+        let dt = now - self.time;
+        if dt > 0.0 {
+            for (j, drive) in model.iter().enumerate() {
+                let delay = drive.delay_ms / 1e3;
+                let u0 = self.at(self.time - delay)[j];
+                let u1 = self.at(now - delay)[j];
+                let tau = drive.tau_ms / 1e3;
+                // Exact over the step for an input linear between its ends.
+                self.output[j] = if tau > 0.0 {
+                    let slope = (u1 - u0) / dt;
+                    let decay = (-dt / tau).exp();
+                    u1 - slope * tau + (self.output[j] - u0 + slope * tau) * decay
+                } else {
+                    u1
+                };
+            }
+            self.time = now;
+            let longest = model.iter().fold(0.0_f64, |m, t| m.max(t.delay_ms / 1e3));
+            let keep_from = now - longest - HISTORY_MARGIN;
+            while self.history.len() > 2 && self.history[1].0 < keep_from {
+                self.history.pop_front();
+            }
+        }
+        self.output
+    }
+
+    /// The controller's set point at time `t`, linear between the ones recorded.
+    fn at(&self, t: f64) -> [f64; N] {
+        let Some(&(first_t, first)) = self.history.front() else {
+            return self.output;
+        };
+        if t <= first_t {
+            return first;
+        }
+        for ((t0, q0), (t1, q1)) in self.history.iter().zip(self.history.iter().skip(1)) {
+            if t <= *t1 {
+                let s = (t - t0) / (t1 - t0);
+                return std::array::from_fn(|j| q0[j] + (q1[j] - q0[j]) * s);
+            }
+        }
+        self.history.back().map_or(self.output, |(_, q)| *q)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_step_arrives_after_the_delay_then_lags() {
+        let model = [JointTracking {
+            delay_ms: 10.0,
+            tau_ms: 20.0,
+        }];
+        let mut f = DriveFilter::new([0.0], 0.0);
+        let dt = 0.001;
+        let mut out = Vec::new();
+        // The set point steps to 1 at 1 ms (linear from 0 at 0 s).
+        f.follow(&model, 0.0, [0.0], 0.0);
+        for k in 1..=100 {
+            let t = k as f64 * dt;
+            out.push(f.follow(&model, 0.001, [1.0], t)[0]);
+        }
+        // Nothing before the delay; then 1 - exp(-(t - 10 ms - ramp) / 20 ms).
+        assert!(out[9].abs() < 1e-12, "{}", out[9]);
+        let at_50ms = out[49];
+        let expected = 1.0 - (-(0.050 - 0.011) / 0.020f64).exp();
+        assert!((at_50ms - expected).abs() < 0.02, "{at_50ms} vs {expected}");
+        assert!(out.windows(2).all(|w| w[1] >= w[0]));
+    }
+
+    #[test]
+    fn no_tracking_is_the_set_point() {
+        let model = [JointTracking::default(); 2];
+        let mut f = DriveFilter::new([0.0, 1.0], 0.0);
+        assert_eq!(f.follow(&model, 0.004, [0.5, -1.0], 0.004), [0.5, -1.0]);
+    }
+}
