@@ -7,13 +7,12 @@
 use crate::eval_cmd::EvalArgs;
 use anyhow::{Context, Result};
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, Deployment, JsonLog, ModelIo};
+use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::evaluation::{Evaluation, evaluate};
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::wilson_lower_bound;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 #[derive(clap::Args)]
 pub struct DeploymentEvalArgs {
@@ -53,48 +52,31 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     };
     let table = fairgrasp_rl::model::env_table(policy.env_config())?;
     let link = SimulatedController::new(policy.env_id(), &table, settings)?;
-    // A fault stops the arm and ends a deployment run, as it must on a robot; here it counts
-    // as a failed episode and the evaluation goes on from the next placement with a fresh loop.
     let started = std::time::Instant::now();
-    let (mut played, mut successes) = (0u32, 0u32);
-    let mut faults: Vec<String> = Vec::new();
-    while played < args.episodes {
-        let options = DeployOptions {
-            live: true,
-            episodes: args.episodes - played,
-            safety: SafetyConfig {
-                speed_scale: d.speed_scale,
-                ..SafetyConfig::default()
-            },
-            // Judged at success; putting the object down would only add simulated time.
-            after_success: AfterSuccess::Hold,
-            ..DeployOptions::default()
-        };
-        let mut deployment = Deployment::new(
-            Box::new(link.clone()),
-            Policy::load(&args.model)?,
-            calibration.clone(),
-            options,
-            JsonLog::create(None)?,
-            Arc::new(AtomicBool::new(false)),
-        )?;
-        if played == 0 {
-            for why in deployment.mismatches() {
-                eprintln!("warning: {why}");
-            }
-        }
-        let mut host = link.host_from(args.seed + played as u64);
-        let report = deployment.run(&mut host, &mut link.pose_source())?;
-        played += report.episodes.len() as u32;
-        successes += (report.episodes.iter())
-            .filter(|e| e.success == Some(true))
-            .count() as u32;
-        if let Some(fault) = report.fault {
-            println!("episode {}: stopped by a fault: {fault}", played + 1);
-            faults.push(fault.to_string());
-            played += 1;
-        }
+    let options = DeployOptions {
+        live: true,
+        episodes: args.episodes,
+        safety: SafetyConfig {
+            speed_scale: d.speed_scale,
+            ..SafetyConfig::default()
+        },
+        // Judged at success; putting the object down would only add simulated time.
+        after_success: AfterSuccess::Hold,
+        ..DeployOptions::default()
+    };
+    let evaluation = evaluate(&link, &args.model, &calibration, &options, args.seed)?;
+    for why in &evaluation.mismatches {
+        eprintln!("warning: {why}");
     }
+    for (i, fault) in evaluation.faults.iter().enumerate() {
+        println!("fault {}: {fault}", i + 1);
+    }
+    let Evaluation {
+        played,
+        successes,
+        faults,
+        ..
+    } = evaluation;
     let seconds = started.elapsed().as_secs_f64();
     let rate = successes as f64 / played.max(1) as f64;
     let bound = wilson_lower_bound(successes, played);

@@ -3,9 +3,10 @@
 //! a simulated clock with drawn reply latencies (`fairgrasp eval --deployment`).
 
 use fairgrasp_deploy::calibration::Calibration;
-use fairgrasp_deploy::robot::RobotLink;
-use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo};
+use fairgrasp_deploy::robot::{RobotCommand, RobotLink};
+use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, Deployment, JsonLog, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
+use fairgrasp_deploy::twin::evaluation::evaluate;
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
 use fairgrasp_rl::policies::Policy;
 use std::path::PathBuf;
@@ -18,6 +19,16 @@ fn model_dir() -> PathBuf {
 }
 
 fn run(speed_scale: f64, episodes: u32, seed: u64) -> (u32, u32, f64) {
+    run_after(speed_scale, episodes, seed, &[])
+}
+
+/// [`run`] on a controller that has been sent `before` first (the pendant's settings).
+fn run_after(
+    speed_scale: f64,
+    episodes: u32,
+    seed: u64,
+    before: &[RobotCommand],
+) -> (u32, u32, f64) {
     let policy = Policy::load(&model_dir()).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
@@ -25,7 +36,10 @@ fn run(speed_scale: f64, episodes: u32, seed: u64) -> (u32, u32, f64) {
         seed,
         ..SimulatedSettings::default()
     };
-    let link = SimulatedController::new(policy.env_id(), &table, settings).unwrap();
+    let mut link = SimulatedController::new(policy.env_id(), &table, settings).unwrap();
+    for command in before {
+        link.send(command).unwrap();
+    }
     let options = DeployOptions {
         live: true,
         episodes,
@@ -52,6 +66,44 @@ fn run(speed_scale: f64, episodes: u32, seed: u64) -> (u32, u32, f64) {
         .filter(|e| e.success == Some(true))
         .count() as u32;
     (grasped, report.episodes.len() as u32, link.elapsed())
+}
+
+/// A fault fails its episode only: the evaluation clears it as an operator would and plays on.
+#[test]
+fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
+    let link =
+        SimulatedController::new(policy.env_id(), &table, SimulatedSettings::default()).unwrap();
+    link.collide();
+    let options = DeployOptions {
+        live: true,
+        episodes: 3,
+        safety: SafetyConfig {
+            speed_scale: 1.0,
+            ..SafetyConfig::default()
+        },
+        after_success: AfterSuccess::Hold,
+        ..DeployOptions::default()
+    };
+    let calibration = Calibration::identity(&io.limits_rad);
+    let e = evaluate(&link, &model_dir(), &calibration, &options, 2_000_000_200).unwrap();
+    assert_eq!(e.played, 3, "{e:?}");
+    assert_eq!(e.faults.len(), 1, "{e:?}");
+    assert!(e.faults[0].contains("collision"), "{e:?}");
+    assert!(e.successes >= 1, "{e:?}");
+}
+
+/// A pendant's override of 10 % caps servo motion at 18 deg/s: a stream at full speed would
+/// fall behind its set points into a following error. The loop sets the override to its own
+/// speed cap's share first.
+#[test]
+fn the_deployment_sets_the_speed_override_it_streams_at() {
+    let slow_pendant = [RobotCommand::SetSpeed { percent: 10 }];
+    let (grasped, played, _) = run_after(1.0, 2, 2_000_000_100, &slow_pendant);
+    assert_eq!(played, 2);
+    assert!(grasped >= 1, "{grasped} of 2");
 }
 
 #[test]

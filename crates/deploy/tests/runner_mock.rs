@@ -229,8 +229,11 @@ fn a_live_run_enables_homes_and_streams_servo_set_points() {
     assert_eq!(report.episodes.len(), 2);
     assert_eq!(host.0, 2);
     let names: Vec<&str> = robot.calls().iter().map(|(_, c)| c.method()).collect();
-    assert_eq!(&names[..3], ["RobotEnable", "ActGripper", "MoveJ"]);
-    let first_episode: Vec<&str> = names[2..]
+    assert_eq!(
+        &names[..4],
+        ["RobotEnable", "SetSpeed", "ActGripper", "MoveJ"]
+    );
+    let first_episode: Vec<&str> = names[3..]
         .iter()
         .copied()
         .take_while(|n| *n != "ServoMoveEnd")
@@ -359,14 +362,28 @@ fn ctrl_c_stops_the_arm() {
     assert_eq!(calls[n - 1].1, RobotCommand::ServoMoveEnd);
 }
 
-/// The home move goes at the caps in force: MoveJ's `vel` and `acc` are the speed scale's
-/// share of the FR5's top joint speed and of the controller's top MoveJ acceleration.
+/// The home move goes at the caps in force: the controller's global override is set to the
+/// speed scale's share of the FR5's top joint speed, and MoveJ's `vel` and `acc`, which the
+/// controller scales by it, make up the rest of the caps.
 #[test]
 fn the_move_home_is_capped_by_the_speed_scale() {
     use fairgrasp_deploy::fairino::fr5;
     let robot = MockRobot::new(home(), Trouble::None, 0);
     let (mut d, _) = deployment_with(&robot, &model_dir(), true, 2, 1, 0.25);
     d.run(&mut Counting(0), &mut cube()).unwrap();
+    let calls = robot.calls();
+    let override_at = |i: usize| {
+        calls[..i].iter().rev().find_map(|(_, c)| match c {
+            RobotCommand::SetSpeed { percent } => Some(*percent as f64 / 100.0),
+            _ => None,
+        })
+    };
+    let home_move = (calls.iter())
+        .position(|(_, c)| matches!(c, RobotCommand::MoveJ { .. }))
+        .unwrap();
+    // 45 deg/s is 24.9 % of the top speed: 25 %.
+    let factor = override_at(home_move).expect("the override is set before the first move");
+    assert_eq!(factor, 0.25);
     let (speed, acc) = robot
         .calls()
         .iter()
@@ -379,13 +396,13 @@ fn the_move_home_is_capped_by_the_speed_scale() {
             _ => None,
         })
         .unwrap();
-    // 180 deg/s × 0.25 and 720 deg/s² × 0.25².
+    // 180 deg/s × 0.25 and 720 deg/s² × 0.25², with the override.
     assert!(
-        (speed - 100.0 * 45.0 / fr5::MOVE_J_FULL_SPEED_DEG_S).abs() < 1e-9,
+        (speed * factor - 100.0 * 45.0 / fr5::MOVE_J_FULL_SPEED_DEG_S).abs() < 1e-9,
         "{speed}"
     );
     assert!(
-        (acc - 100.0 * 45.0 / fr5::MOVE_J_FULL_ACC_DEG_S2[0]).abs() < 1e-9,
+        (acc * factor - 100.0 * 45.0 / fr5::MOVE_J_FULL_ACC_DEG_S2[0]).abs() < 1e-9,
         "{acc}"
     );
 }

@@ -119,13 +119,35 @@ impl GuardedLink {
 
     /// Stops the arm: StopMotion then ServoMoveEnd, whatever each returns, then refuses every
     /// later command. Returns when both calls have returned (each bounded by the link's
-    /// timeout).
+    /// timeout). A motion command already on its way aside (a MoveGripper) may land after
+    /// them: its reply is waited for, and then both are sent again, so that the controller's
+    /// last word is the stop.
     pub fn stop(&mut self, fault: &Fault) {
         if self.tripped.is_some() {
             return;
         }
         let detected = Instant::now();
         self.log.note("fault", serde_json::json!(fault.to_string()));
+        self.send_stop();
+        let took = detected.elapsed();
+        self.stopped_in = Some(took);
+        self.log
+            .note("stopped_ms", serde_json::json!(took.as_secs_f64() * 1000.0));
+        if let Some((command, call)) = self.aside.take() {
+            let result = call
+                .join()
+                .unwrap_or_else(|_| Err("the call's thread panicked".into()));
+            self.log.sent(&command, result);
+            if command.moves() {
+                self.send_stop();
+            }
+        }
+        self.log.flush();
+        self.tripped = Some(fault.clone());
+    }
+
+    /// StopMotion then ServoMoveEnd, whatever each returns (printed in a dry run).
+    fn send_stop(&mut self) {
         for command in [RobotCommand::StopMotion, RobotCommand::ServoMoveEnd] {
             if self.live {
                 let result = self.link.send(&command).map_err(|e| e.to_string());
@@ -138,12 +160,6 @@ impl GuardedLink {
                 self.log.sent(&command, Ok(()));
             }
         }
-        let took = detected.elapsed();
-        self.stopped_in = Some(took);
-        self.log
-            .note("stopped_ms", serde_json::json!(took.as_secs_f64() * 1000.0));
-        self.log.flush();
-        self.tripped = Some(fault.clone());
     }
 
     /// The link's clock ([`RobotLink::now`]).
@@ -183,5 +199,76 @@ pub fn describe(command: &RobotCommand) -> String {
             joints(joints_deg, 2)
         ),
         other => format!("{other:?}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+    use std::time::Duration;
+
+    /// The controller's call log, in the order calls land.
+    type Calls = Arc<Mutex<Vec<&'static str>>>;
+
+    struct Link(Calls);
+    struct SlowSide(Calls);
+
+    impl RobotLink for Link {
+        fn latest_state(&self) -> crate::Result<StampedState> {
+            Ok(StampedState {
+                state: Default::default(),
+                received_at: Instant::now(),
+                sequence: 0,
+            })
+        }
+        fn send(&mut self, command: &RobotCommand) -> crate::Result<()> {
+            self.0.lock().unwrap().push(command.method());
+            Ok(())
+        }
+        fn side_line(&self) -> Option<Arc<dyn SideLine>> {
+            Some(Arc::new(SlowSide(self.0.clone())))
+        }
+    }
+
+    impl SideLine for SlowSide {
+        /// The command lands 50 ms after it was sent.
+        fn send(&self, command: &RobotCommand) -> crate::Result<()> {
+            std::thread::sleep(Duration::from_millis(50));
+            self.0.lock().unwrap().push(command.method());
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_gripper_command_landing_after_the_stop_is_followed_by_another() {
+        let calls = Calls::default();
+        let mut link = GuardedLink::new(
+            Box::new(Link(calls.clone())),
+            true,
+            JsonLog::create(None).unwrap(),
+        );
+        let close = RobotCommand::MoveGripper {
+            index: 1,
+            position_percent: 0,
+            speed_percent: 100,
+            force_percent: 50,
+            max_time_ms: 3000,
+        };
+        link.send_aside(&close).unwrap();
+        link.stop(&Fault::Interrupted);
+        // The first stop does not wait for the gripper's call; the last word is a stop.
+        assert_eq!(
+            *calls.lock().unwrap(),
+            [
+                "StopMotion",
+                "ServoMoveEnd",
+                "MoveGripper",
+                "StopMotion",
+                "ServoMoveEnd"
+            ]
+        );
+        assert!(link.stopped_in().unwrap() < Duration::from_millis(40));
+        assert!(link.send(&close).is_err(), "refused once stopped");
     }
 }

@@ -364,7 +364,14 @@ impl Deployment {
         fault
     }
 
-    /// Enables the arm in automatic mode and activates the gripper when needed.
+    /// Enables the arm in automatic mode, sets the controller's global speed override to the
+    /// safety caps' share of the top speed, and activates the gripper when needed.
+    ///
+    /// The override cannot be read back (no call or stream field carries it), and it slows
+    /// servo motion as well as MoveJ: left as the pendant set it, a low override would make the
+    /// arm fall behind the stream. Set to the caps' share, the controller enforces the same speed
+    /// as the safety filter, a second cap that does not rest on this program; it stays set after
+    /// the run.
     fn prepare(&mut self) -> std::result::Result<(), Fault> {
         let state = self.checked_state()?;
         if !state.state.enabled {
@@ -374,6 +381,8 @@ impl Deployment {
         if state.state.robot_mode != 0 {
             self.link.send(&RobotCommand::Mode { mode: 0 })?;
         }
+        let percent = self.filter.speed_override_percent();
+        self.link.send(&RobotCommand::SetSpeed { percent })?;
         if !state.state.gripper_active {
             self.link.send(&RobotCommand::ActGripper {
                 index: self.options.gripper_index,
@@ -417,10 +426,12 @@ impl Deployment {
         let now = self.checked_state()?.state.joints_deg;
         self.filter.check_path(&now, &home)?;
         let (speed, acc, _) = self.filter.caps();
+        // The controller scales MoveJ's speed and acceleration by the override too.
+        let factor = 100.0 / self.filter.speed_override_percent() as f64;
         self.link.send(&RobotCommand::MoveJ {
             joints_deg: home,
-            speed_percent: (100.0 * speed / fr5::MOVE_J_FULL_SPEED_DEG_S).min(100.0),
-            acc_percent: (100.0 * acc / fr5::MOVE_J_FULL_ACC_DEG_S2[0]).min(100.0),
+            speed_percent: (100.0 * speed / fr5::MOVE_J_FULL_SPEED_DEG_S * factor).min(100.0),
+            acc_percent: (100.0 * acc / fr5::MOVE_J_FULL_ACC_DEG_S2[0] * factor).min(100.0),
         })
     }
 

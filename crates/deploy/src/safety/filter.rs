@@ -127,6 +127,15 @@ impl SafetyFilter {
         self.ramp.caps()
     }
 
+    /// The controller's global speed override (`SetSpeed`, %) that caps the arm at this
+    /// filter's speed: the speed cap's share of the FR5's top joint speed, rounded up.
+    pub fn speed_override_percent(&self) -> u8 {
+        let (speed, _, _) = self.caps();
+        (100.0 * speed / crate::fairino::fr5::MOVE_J_FULL_SPEED_DEG_S)
+            .ceil()
+            .clamp(1.0, 100.0) as u8
+    }
+
     /// The TCP box enforced (mm), with the table's height folded into its floor.
     pub fn workspace(&self) -> ([f64; 3], [f64; 3]) {
         (self.box_min, self.box_max)

@@ -424,6 +424,9 @@ impl Run<'_> {
         let start = self.recording.start_deg;
         filter.start(&start)?;
         let (_, _, period) = filter.caps();
+        // A pendant's low override would cap the excitation and read as the drives' lag.
+        let percent = filter.speed_override_percent();
+        self.send(&RobotCommand::SetSpeed { percent })?;
         self.send(&RobotCommand::ServoMoveStart)?;
         let begun = self.link.now();
         let plan_start = self.secs(begun);

@@ -25,8 +25,11 @@
 //!   ([`fr5::MAX_SPEED_DEG_S`], plus [`ControllerConfig::servo_speed_tolerance`]) covers in
 //!   `cmdT`, is the controller's error: the call answers 29, `main_code` 29 shows with the
 //!   joint in `sub_code` (1–6 past a limit, 11–16 too fast: [`MAIN_CODE_SERVOJ_OVER_LIMIT`]),
-//!   and the arm brakes. Each accepted target is reached along a straight line over `cmdT`
-//!   (the set point never faster than the joint's top speed).
+//!   and the arm brakes. Each accepted target is reached along a straight line over `cmdT`,
+//!   the set point never faster than the joint's top speed times `SetSpeed`'s global %: a
+//!   stream faster than the override allows falls behind its targets (chosen: FAIRINO does not
+//!   document how the override acts on `ServoJ`; industrial controllers' overrides scale the
+//!   commanded speed, and a cap keeps the stream's own timing).
 //! - **`StopMotion`** aborts every move (a waiting `MoveJ` returns 14) and the servo session.
 //!   A fault, the e-stop (31), a safety stop (99), disabling (101) or manual mode (14) abort the
 //!   same way, with their code.
@@ -690,7 +693,11 @@ impl Controller {
             self.setpoint = active.profile.at(now);
         } else if let Some(step) = &self.servo_step {
             let desired = step.at(now);
-            self.setpoint = rate_limited(&self.setpoint, &desired, &self.config.max_speed_deg, dt);
+            let cap = self
+                .config
+                .max_speed_deg
+                .map(|v| v * self.speed_percent / 100.0);
+            self.setpoint = rate_limited(&self.setpoint, &desired, &cap, dt);
         }
         self.velocity = std::array::from_fn(|j| (self.setpoint[j] - before[j]) / dt);
         self.setpoint_time = now;

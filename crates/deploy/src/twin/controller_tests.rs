@@ -377,6 +377,37 @@ fn kinematics_round_trip_through_the_wire_format() {
 }
 
 #[test]
+fn the_speed_override_caps_servo_motion_and_a_faster_stream_falls_behind() {
+    // 0.8° every 8 ms: 100°/s, under the top speed, over 25 % of it (45°/s).
+    let stream = |b: &mut Bench| {
+        assert_eq!(b.c.servo_start(), codes::OK);
+        let mut q = HOME;
+        let mut fastest: f64 = 0.0;
+        for _ in 0..25 {
+            q[0] += 0.8;
+            let before = b.q[0];
+            assert_eq!(b.c.servo_j(b.t, q, 0.008), codes::OK);
+            b.run(0.008);
+            fastest = fastest.max((b.q[0] - before) / 0.008);
+        }
+        (q[0] - b.q[0], fastest)
+    };
+    let mut full = Bench::started();
+    let (behind, fastest) = stream(&mut full);
+    assert!(
+        behind < 1e-6 && (fastest - 100.0).abs() < 1.0,
+        "{behind}° {fastest}°/s"
+    );
+    let mut slowed = Bench::started();
+    assert_eq!(slowed.c.set_speed(25.0), codes::OK);
+    let (behind, fastest) = stream(&mut slowed);
+    let cap = MAX_SPEED_DEG_S[0] * 0.25;
+    assert!(fastest <= cap + 1e-6, "{fastest}°/s over {cap}°/s");
+    // 200 ms at 100°/s asked, at most 45°/s done: 11° behind.
+    assert!(behind > 10.0, "{behind}°");
+}
+
+#[test]
 fn a_servo_target_past_a_joint_limit_raises_29_and_the_arm_brakes() {
     let mut b = Bench::started();
     let speed = 120.0;

@@ -33,6 +33,7 @@
 
 pub mod call_log;
 pub mod controller;
+pub mod evaluation;
 pub mod faults;
 pub mod gripper;
 pub mod motion;

@@ -278,6 +278,14 @@ impl SimulatedController {
         self.inner().controller.set_tracking(tracking);
     }
 
+    /// A collision now, as the twin's `collision=1` fault: `collision_state` 1, `main_code`
+    /// 201, the arm brakes, until `ResetAllError`.
+    pub fn collide(&self) {
+        let mut inner = self.inner();
+        let now = inner.t;
+        inner.controller.set_collision(now, true, 0);
+    }
+
     /// Simulated seconds so far.
     pub fn elapsed(&self) -> f64 {
         self.inner().t

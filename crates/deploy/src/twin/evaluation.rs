@@ -1,0 +1,68 @@
+//! The deployment-matched evaluation's episodes (`fairgrasp eval --deployment`): the deployment
+//! loop on a [`SimulatedController`], placement after placement.
+//!
+//! A fault stops the arm and ends a deployment run, as it must on a robot. Here it counts as a
+//! failed episode; the controller's fault is then cleared as an operator clears it
+//! (`ResetAllError`), and the evaluation goes on from the next placement with a fresh loop.
+//! Without the reset, one collision latched on the controller failed every later episode.
+
+use super::simulated::SimulatedController;
+use crate::calibration::Calibration;
+use crate::error::Result;
+use crate::robot::{RobotCommand, RobotLink};
+use crate::runner::{DeployOptions, Deployment, JsonLog};
+use fairgrasp_rl::policies::Policy;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// What the episodes came to.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Evaluation {
+    pub played: u32,
+    pub successes: u32,
+    /// The fault of each episode stopped by one, in order.
+    pub faults: Vec<String>,
+    /// The loop's warnings about the model against the deployment (from the first loop).
+    pub mismatches: Vec<String>,
+}
+
+/// Plays `options.episodes` episodes of the model in `model` on `link`, episode `i` placed from
+/// `seed + i`.
+pub fn evaluate(
+    link: &SimulatedController,
+    model: &Path,
+    calibration: &Calibration,
+    options: &DeployOptions,
+    seed: u64,
+) -> Result<Evaluation> {
+    let mut out = Evaluation::default();
+    while out.played < options.episodes {
+        let mut deployment = Deployment::new(
+            Box::new(link.clone()),
+            Policy::load(model)?,
+            calibration.clone(),
+            DeployOptions {
+                episodes: options.episodes - out.played,
+                ..options.clone()
+            },
+            JsonLog::create(None)?,
+            Arc::new(AtomicBool::new(false)),
+        )?;
+        if out.played == 0 {
+            out.mismatches = deployment.mismatches();
+        }
+        let mut host = link.host_from(seed + out.played as u64);
+        let report = deployment.run(&mut host, &mut link.pose_source())?;
+        out.played += report.episodes.len() as u32;
+        out.successes += (report.episodes.iter())
+            .filter(|e| e.success == Some(true))
+            .count() as u32;
+        if let Some(fault) = report.fault {
+            out.faults.push(fault.to_string());
+            out.played += 1;
+            link.clone().send(&RobotCommand::ResetAllError)?;
+        }
+    }
+    Ok(out)
+}
