@@ -8,14 +8,12 @@
 //! [`ArmState::from_scene`], once per control period, as in training: success and failure (an
 //! object off the table) latch until the next reset.
 //!
-//! Two things the training scene does not need are read or set here, for the controller:
-//! - **Contact force** (what the controller's collision detection feels): the net force that
-//!   everything outside the robot (the table, objects, bin parts) exerts on the arm and the
-//!   gripper, averaged over [`CONTACT_WINDOW`] physics steps. A gripper's squeeze on what it
-//!   holds is internal to the gripper: the pads' forces cancel, as they do for the arm's joint
-//!   torques, and only the held object's weight remains. A link or a fingertip pressing on the
-//!   table, or on an object resting there, counts in full. The joint reported with it is the
-//!   arm joint (1–6) that carries the link pressing hardest.
+//! Two things are read or set here for the controller:
+//! - **Contact force** (what the controller's collision detection feels): the simulator's
+//!   [`CollisionSensor`], the net force that everything outside the robot exerts on it averaged
+//!   over [`CONTACT_WINDOW`] physics steps — what training's `collision_force_limit` watches
+//!   too. The joint reported with it is the arm joint (1–6) that carries the link pressing
+//!   hardest.
 //! - **Gripper force**: `MoveGripper`'s force % sets the finger drive's force limit, scaled so
 //!   that [`NOMINAL_FORCE_PERCENT`] is the scene's own `gripper.force_limit` (the force training
 //!   used).
@@ -25,8 +23,8 @@ use crate::error::{DeployError, Result};
 use fairgrasp_env::arm::{ArmState, ArmWorld};
 use fairgrasp_env::registry;
 use fairgrasp_sim::kinematics::SerialChain;
-use fairgrasp_sim::rapier3d::na::{Isometry3, Vector3};
-use fairgrasp_sim::scene::Scene;
+use fairgrasp_sim::rapier3d::na::Isometry3;
+use fairgrasp_sim::scene::{CollisionSensor, Scene};
 use serde::Serialize;
 
 /// How one episode went, by the task's rule.
@@ -50,7 +48,7 @@ pub struct EpisodeResult {
 }
 
 /// Physics steps the contact force is averaged over (one step's solver impulse alone can spike).
-pub const CONTACT_WINDOW: usize = 4;
+pub const CONTACT_WINDOW: usize = CollisionSensor::WINDOW;
 
 /// The `MoveGripper` force % at which the fingers squeeze with the scene's `gripper.force_limit`
 /// (the deployment loop's own setting, so that deployment meets the fingers training saw).
@@ -83,7 +81,7 @@ pub struct World {
     link_joint: std::collections::HashMap<String, i32>,
     /// The net external force on the robot in the last physics steps (N, world frame), newest
     /// last, with the joint carrying the link pressing hardest.
-    contacts: std::collections::VecDeque<(Vector3<f32>, i32)>,
+    contacts: CollisionSensor,
     /// The force % the finger drive squeezes with now.
     gripper_force_percent: f64,
 }
@@ -132,7 +130,7 @@ impl World {
             drive_bias: [0.0; 6],
             last_setpoint: None,
             link_joint,
-            contacts: std::collections::VecDeque::with_capacity(CONTACT_WINDOW + 1),
+            contacts: CollisionSensor::new(),
             gripper_force_percent: NOMINAL_FORCE_PERCENT,
         };
         world.start_episode(seed)?;
@@ -244,38 +242,18 @@ impl World {
         Ok(())
     }
 
-    /// Adds the last physics step's external force on the robot to the window.
+    /// Adds the last physics step's external force on the robot to the sensor.
     fn read_contacts(&mut self) {
-        let mut net = Vector3::zeros();
-        let mut hardest = (0.0f32, 0);
-        for c in self.inner.scene().robot_contacts() {
-            net += c.force;
-            let n = c.force.norm();
-            if n > hardest.0 {
-                hardest = (n, self.link_joint.get(&c.link).copied().unwrap_or(0));
-            }
-        }
-        if self.contacts.len() == CONTACT_WINDOW {
-            self.contacts.pop_front();
-        }
-        self.contacts.push_back((net, hardest.1));
+        self.contacts.read(self.inner.scene());
     }
 
     /// The net external force on the robot (N) over the last [`CONTACT_WINDOW`] physics steps,
     /// and the arm joint (1–6) carrying the link that pressed hardest most recently.
     pub fn contact_force(&self) -> (f64, i32) {
-        if self.contacts.is_empty() {
-            return (0.0, 0);
-        }
-        let sum: Vector3<f32> = self.contacts.iter().map(|(f, _)| f).sum();
-        let joint = self
-            .contacts
-            .iter()
-            .rev()
-            .map(|&(_, j)| j)
-            .find(|&j| j > 0)
+        let joint = (self.contacts.hardest_link())
+            .and_then(|link| self.link_joint.get(link).copied())
             .unwrap_or(0);
-        ((sum.norm() / self.contacts.len() as f32) as f64, joint)
+        (self.contacts.force() as f64, joint)
     }
 
     fn judge(&mut self) {

@@ -42,7 +42,7 @@ use fairgrasp_render::Renderer;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::Isometry3;
-use fairgrasp_sim::scene::{PhysicalParams, Scene, SceneConfig};
+use fairgrasp_sim::scene::{CollisionSensor, PhysicalParams, Scene, SceneConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::VecDeque;
@@ -129,6 +129,8 @@ struct Episode {
     gripper: Option<GripperDrive>,
     /// The arm's drives, when `[control.drives]` is on.
     drives: Option<ArmDrives>,
+    /// What the controller's collision detection feels (`control.collision_force_limit`).
+    collision_sensor: CollisionSensor,
     /// This episode's speed scale (`control.speed_scales`) and the physics substeps of one
     /// control step at it.
     speed_scale: f32,
@@ -641,6 +643,7 @@ impl<T: Task> Env for ArmEnv<T> {
             ramp,
             gripper,
             drives,
+            collision_sensor: CollisionSensor::new(),
             speed_scale,
             substeps,
             estimator,
@@ -710,12 +713,14 @@ impl<T: Task> Env for ArmEnv<T> {
         let mut early = None;
         let force_limit = self.config.control.collision_force_limit;
         let mut peak_force: f32 = 0.0;
+        let sensor = &mut episode.collision_sensor;
         let mut read_early = |scene: &Scene, done: u32| {
             if age > 0 && done == substeps - age {
                 early = Some(ArmState::from_scene(scene));
             }
             if force_limit.is_some() {
-                peak_force = peak_force.max(scene.robot_contact_force());
+                sensor.read(scene);
+                peak_force = peak_force.max(sensor.force());
             }
         };
         let mut gripper = episode.gripper.as_mut();

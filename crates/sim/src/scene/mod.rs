@@ -15,6 +15,7 @@
 //! [`Scene::reachable_from_above`]), then [`Scene::settle`]. [`Scene::reset`] does all of it with
 //! a random layout.
 
+mod collision_sensor;
 mod config;
 mod objects;
 
@@ -29,6 +30,7 @@ use crate::math::yaw_of;
 use crate::model::{Origin, RobotModel};
 use crate::robot::{JointDrive, JointSets, PdGains, Robot, RobotBuildOptions, groups};
 use crate::{assets, model::LoadOptions};
+pub use collision_sensor::CollisionSensor;
 use objects::{MeshCache, ObjectHandles};
 pub use objects::{PlacedShape, RobotContact, ShapeOwner};
 use rand::{Rng, SeedableRng};

@@ -492,31 +492,6 @@ impl Scene {
         )
     }
 
-    /// The largest normal force (N) between one robot link and one other body (an object, the
-    /// table, a bin part) in the last physics step: what a cobot's collision detection watches.
-    pub fn robot_contact_force(&self) -> f32 {
-        let robot = &self.robot.bodies;
-        let is_robot = |c: ColliderHandle| {
-            (self.world.colliders[c].parent()).is_some_and(|body| robot.contains(&body))
-        };
-        let mut peak: f32 = 0.0;
-        for &body in robot {
-            for &c in self.world.bodies[body].colliders() {
-                for pair in self.world.narrow_phase.contact_pairs_with(c) {
-                    let other = if pair.collider1 == c {
-                        pair.collider2
-                    } else {
-                        pair.collider1
-                    };
-                    if !is_robot(other) {
-                        peak = peak.max(pair.total_impulse_magnitude());
-                    }
-                }
-            }
-        }
-        peak / self.params.dt
-    }
-
     /// Every contact between a robot body and an object, the table or a bin part in the last
     /// physics step, with its force on the robot; pairs between robot links are left out.
     pub fn robot_contacts(&self) -> Vec<RobotContact> {
