@@ -133,14 +133,11 @@ impl GuardedLink {
         self.stopped_in = Some(took);
         self.log
             .note("stopped_ms", serde_json::json!(took.as_secs_f64() * 1000.0));
-        if let Some((command, call)) = self.aside.take() {
-            let result = call
-                .join()
-                .unwrap_or_else(|_| Err("the call's thread panicked".into()));
-            self.log.sent(&command, result);
-            if command.moves() {
-                self.send_stop();
-            }
+        let in_flight_moves = self.aside.as_ref().is_some_and(|(c, _)| c.moves());
+        // Its failure changes nothing now: the arm is being stopped.
+        let _ = self.settle_aside(true);
+        if in_flight_moves {
+            self.send_stop();
         }
         self.log.flush();
         self.tripped = Some(fault.clone());

@@ -136,7 +136,6 @@ impl ArmDrives {
     pub fn drive(&mut self, scene: &mut Scene) -> std::result::Result<(), SimError> {
         let q = (self.filter).follow(&self.model, self.set_at, self.set_point, self.time);
         self.time += scene.dt() as f64;
-        let q: Vec<f32> = q.iter().map(|&v| v as f32).collect();
-        scene.set_arm_targets(&q)
+        scene.set_arm_targets(&q.map(|v| v as f32))
     }
 }
