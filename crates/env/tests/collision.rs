@@ -3,6 +3,7 @@
 
 use fairgrasp_env::arm::ActionMode;
 use fairgrasp_env::core::EpisodeEvent;
+use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::tasks::grasp::GraspConfig;
 use fairgrasp_env::{Env, GraspEnv};
 
@@ -10,17 +11,31 @@ mod common;
 use common::scripted_successes;
 
 fn env(limit: Option<f32>) -> GraspEnv {
+    env_with(|c| c.control.collision_force_limit = limit)
+}
+
+fn env_with(mutate: impl FnOnce(&mut GraspConfig)) -> GraspEnv {
     let mut config = GraspConfig::default();
     config.control.action_mode = ActionMode::Cartesian;
-    config.control.collision_force_limit = limit;
+    mutate(&mut config);
     GraspEnv::new(config).expect("env builds")
 }
 
 /// Closed fingers over the cube's centre, then straight down onto its top: the events and the
 /// largest `contact_force` seen before the episode ended.
 fn press_down(env: &mut GraspEnv, seed: u64) -> (Vec<EpisodeEvent>, f32, bool) {
+    let (events, forces, terminated) = press_steps(env, seed);
+    (
+        events,
+        forces.iter().fold(0.0, |m, s| m.max(s.0)),
+        terminated,
+    )
+}
+
+/// [`press_down`] with each step's (`contact_force`, `press` reward term).
+fn press_steps(env: &mut GraspEnv, seed: u64) -> (Vec<EpisodeEvent>, Vec<(f32, f32)>, bool) {
     env.reset(Some(seed)).unwrap();
-    let (mut events, mut peak) = (Vec::new(), 0.0f32);
+    let (mut events, mut forces) = (Vec::new(), Vec::new());
     for step in 0..100 {
         let to_object = env.state().unwrap().tcp_to_object(0);
         let above = step < 30;
@@ -34,12 +49,15 @@ fn press_down(env: &mut GraspEnv, seed: u64) -> (Vec<EpisodeEvent>, f32, bool) {
         ];
         let s = env.step(&action).unwrap();
         events.extend(s.info.events.iter().copied());
-        peak = peak.max(s.info.extras.value("contact_force"));
+        forces.push((
+            s.info.extras.value("contact_force"),
+            s.info.reward_terms.value("press"),
+        ));
         if s.terminated || s.truncated {
-            return (events, peak, s.terminated);
+            return (events, forces, s.terminated);
         }
     }
-    (events, peak, false)
+    (events, forces, false)
 }
 
 #[test]
@@ -72,4 +90,58 @@ fn the_limit_must_be_positive() {
     config.control.collision_force_limit = Some(-1.0);
     let error = GraspEnv::new(config).err().expect("refused").to_string();
     assert!(error.contains("control.collision_force_limit"), "{error}");
+}
+
+#[test]
+fn pressing_costs_in_proportion_to_the_force_and_a_grasp_next_to_nothing() {
+    let mut env = env_with(|c| {
+        c.control.collision_penalty = 2.0;
+        c.control.collision_penalty_force = 150.0;
+        // The fingertips clear the table at the lowest TCP target (`configs/ppo_deploy.toml`).
+        c.control.workspace_min[2] = 0.025;
+    });
+    let (events, steps, _) = press_steps(&mut env, 3);
+    // The penalty alone stops nothing.
+    assert!(!events.contains(&EpisodeEvent::Collision), "{events:?}");
+    for &(force, press) in &steps {
+        let expected = -2.0 * (force / 150.0).min(4.0);
+        assert!((press - expected).abs() < 1e-5, "{force} N cost {press}");
+    }
+    let hardest = steps.iter().fold(0.0f32, |m, s| m.min(s.1));
+    assert!(hardest < -2.0, "the press reached past 150 N: {hardest}");
+
+    // A scripted grasp costs a small part of that: the arm pushes the squeezed cube down
+    // into the table while it closes (40-50 N for a third of a second), then lifts it.
+    let mut total = 0.0;
+    let mut n = 0;
+    for seed in 100..104 {
+        env.reset(Some(seed)).unwrap();
+        let mut policy = ScriptedGraspPolicy::new(&env);
+        loop {
+            let s = env.step(&policy.act(&env)).unwrap();
+            total += s.info.reward_terms.value("press");
+            n += 1;
+            if s.terminated || s.truncated {
+                break;
+            }
+        }
+    }
+    let grasp = total / n as f32;
+    assert!(grasp > 0.05 * hardest, "a grasp cost {grasp} per step");
+
+    // Off (the default), there is no such term.
+    let mut free = self::env(None);
+    free.reset(Some(3)).unwrap();
+    let s = free.step(&[0.0, 0.0, -0.02, 0.0, -1.0]).unwrap();
+    assert!(s.info.reward_terms.get("press").is_none());
+}
+
+#[test]
+fn the_penalty_must_be_finite_and_non_negative() {
+    for bad in [-1.0, f32::NAN] {
+        let mut config = GraspConfig::default();
+        config.control.collision_penalty = bad;
+        let error = GraspEnv::new(config).err().expect("refused").to_string();
+        assert!(error.contains("control.collision_penalty"), "{error}");
+    }
 }

@@ -14,11 +14,12 @@ fn env_with(mutate: impl FnOnce(&mut EnvConfig)) -> GraspEnv {
     GraspEnv::new(config).expect("env builds")
 }
 
-fn with_drives(delay_ms: f64, tau_ms: f64) -> GraspEnv {
+fn with_drives(delay_ms: f64, tau_ms: f64, integral: bool) -> GraspEnv {
     env_with(|c| {
         c.control.drives.enabled = true;
         c.control.drives.delay_ms = [delay_ms; 6];
         c.control.drives.tau_ms = [tau_ms; 6];
+        c.control.drives.integral = integral;
     })
 }
 
@@ -44,12 +45,13 @@ fn largest_move(from: &[f32], to: &[f32]) -> f32 {
 
 #[test]
 fn a_delay_holds_the_joints_back_and_a_lag_smooths_them() {
+    // (The integral action off: it would move the targets by the sag it learns.)
     let mut plain = env_with(|_| {});
     plain.reset(Some(4)).unwrap();
     let start = plain.scene().arm_targets();
     let free = targets(&mut plain, 6);
     // A 40 ms delay outlasts the first 33 ms control step: the joints' targets have not moved.
-    let delayed = targets(&mut with_drives(40.0, 0.0), 6);
+    let delayed = targets(&mut with_drives(40.0, 0.0, false), 6);
     assert!(largest_move(&start, &delayed[0]) < 1e-6, "{delayed:?}");
     assert!(largest_move(&start, &free[0]) > 1e-3, "{free:?}");
     // Later they follow the same set points, 40 ms (1.2 steps) behind: by the sixth step they
@@ -58,14 +60,14 @@ fn a_delay_holds_the_joints_back_and_a_lag_smooths_them() {
     assert!(moved(&delayed, 5) > moved(&free, 3), "{delayed:?}");
     assert!(moved(&delayed, 5) < moved(&free, 5));
     // A lag alone starts at once but slower.
-    let lagged = targets(&mut with_drives(0.0, 60.0), 6);
+    let lagged = targets(&mut with_drives(0.0, 60.0, false), 6);
     assert!(moved(&lagged, 0) > 0.0 && moved(&lagged, 0) < 0.5 * moved(&free, 0));
 }
 
 #[test]
 fn the_scripted_policy_still_grasps_through_identified_drives() {
-    // The strict twin's drives: 8 ms delay, 15 ms lag.
-    let mut env = with_drives(8.0, 15.0);
+    // The strict twin's drives: 8 ms delay, 15 ms lag, and the integral action.
+    let mut env = with_drives(8.0, 15.0, true);
     let successes = (0..5)
         .filter(|&s| scripted_episode(&mut env, 100 + s).0)
         .count();
@@ -141,4 +143,32 @@ fn bad_drive_settings_are_named() {
     assert!(nan.contains("tau_ms") && nan.contains("joint 1"), "{nan}");
     let scale = build(|c| c.control.drives.scale = [2.0, 1.0]);
     assert!(scale.contains("control.drives.scale"), "{scale}");
+}
+
+/// The joints' largest distance (rad) from the home pose after 30 still steps from a reset.
+fn sag_at_rest(integral: bool) -> f32 {
+    let mut env = with_drives(8.0, 15.0, integral);
+    env.reset(Some(4)).unwrap();
+    let home = env.scene().config().arm.home.clone();
+    let still = vec![0.0; env.action_space().dim()];
+    for _ in 0..30 {
+        env.step(&still).unwrap();
+    }
+    largest_move(&home, &env.scene().arm_positions())
+}
+
+#[test]
+fn the_drives_integral_takes_out_the_sag_as_the_twins_does() {
+    // The simulated joints have no gravity compensation: held still, they sag below their set
+    // points; the integral (at most 0.5°) brings them back, and in the same way pushes a joint
+    // held off its set point harder the longer it is held.
+    let (with, without) = (sag_at_rest(true), sag_at_rest(false));
+    assert!(
+        without > 0.1f32.to_radians(),
+        "the joints sag {without} rad"
+    );
+    assert!(
+        with < 0.3 * without,
+        "{with} rad with the integral, {without} without"
+    );
 }

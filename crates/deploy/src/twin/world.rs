@@ -22,6 +22,7 @@ use super::controller::{Measured, Setpoint};
 use crate::error::{DeployError, Result};
 use fairgrasp_env::arm::{ArmState, ArmWorld};
 use fairgrasp_env::registry;
+use fairgrasp_sim::control::DriveIntegral;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::Isometry3;
 use fairgrasp_sim::scene::{CollisionSensor, Scene};
@@ -54,20 +55,10 @@ pub const CONTACT_WINDOW: usize = CollisionSensor::WINDOW;
 /// (the deployment loop's own setting, so that deployment meets the fingers training saw).
 pub const NOMINAL_FORCE_PERCENT: f64 = 50.0;
 
-/// Integral gain of the drives' position loop (1/s).
-const DRIVE_KI: f64 = 4.0;
-/// Largest integral correction (deg).
-const DRIVE_BIAS_MAX: f64 = 0.5;
-/// The integral only learns while the set point moves slower than this (deg/s).
-const DRIVE_LEARN_SPEED: f64 = 5.0;
-
 /// The scene, the task, and the judged episode.
 ///
-/// The simulated joints are PD-controlled without gravity compensation, so they sag a few
-/// tenths of a degree below their targets; a real drive's integral action removes that. The
-/// world adds the same: a slow integral term (at most 0.5°, learnt while the set point is nearly
-/// still) to the set points it passes to the simulator, so the joints come to rest where the
-/// controller commands them.
+/// The joints follow the controller's set points through the drives' integral action
+/// ([`DriveIntegral`]), so they come to rest where the controller commands them.
 pub struct World {
     env_id: String,
     inner: Box<dyn ArmWorld>,
@@ -75,8 +66,7 @@ pub struct World {
     substeps: u32,
     physics_steps: u64,
     episode: EpisodeResult,
-    drive_bias: [f64; 6],
-    last_setpoint: Option<[f64; 6]>,
+    integral: DriveIntegral<6>,
     /// The arm joint (1–6; 0 for the base) that carries each robot link.
     link_joint: std::collections::HashMap<String, i32>,
     /// The net external force on the robot in the last physics steps (N, world frame), newest
@@ -127,8 +117,7 @@ impl World {
             substeps,
             physics_steps: 0,
             episode: EpisodeResult::default(),
-            drive_bias: [0.0; 6],
-            last_setpoint: None,
+            integral: DriveIntegral::new(),
             link_joint,
             contacts: CollisionSensor::new(),
             gripper_force_percent: NOMINAL_FORCE_PERCENT,
@@ -170,8 +159,7 @@ impl World {
     /// judged episode.
     pub fn start_episode(&mut self, seed: u64) -> Result<()> {
         self.inner.start_episode(seed)?;
-        self.drive_bias = [0.0; 6];
-        self.last_setpoint = None;
+        self.integral = DriveIntegral::new();
         self.contacts.clear();
         self.episode = EpisodeResult {
             number: self.episode.number + 1,
@@ -189,8 +177,7 @@ impl World {
         let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
         scene.set_arm_positions(&q).map_err(sim)?;
         scene.set_arm_targets(&q).map_err(sim)?;
-        self.drive_bias = [0.0; 6];
-        self.last_setpoint = None;
+        self.integral = DriveIntegral::new();
         Ok(())
     }
 
@@ -203,12 +190,10 @@ impl World {
     /// judges the state.
     pub fn step(&mut self, setpoint: &Setpoint) -> Result<()> {
         let dt = self.dt();
-        let sp = setpoint.joints_deg;
+        let sp = setpoint.joints_deg.map(f64::to_radians);
         let scene = self.inner.scene_mut();
         let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
-        let q: Vec<f32> = (0..6)
-            .map(|j| (sp[j] + self.drive_bias[j]).to_radians() as f32)
-            .collect();
+        let q = self.integral.targets(&sp).map(|v| v as f32);
         scene.set_arm_targets(&q).map_err(sim)?;
         if setpoint.gripper_force_percent != self.gripper_force_percent {
             let nominal = scene.config().gripper.force_limit as f64;
@@ -224,17 +209,10 @@ impl World {
         scene.step_physics().map_err(sim)?;
         self.physics_steps += 1;
         self.read_contacts();
-        let still = self
-            .last_setpoint
-            .is_some_and(|last| super::motion::max_gap(&last, &sp) < DRIVE_LEARN_SPEED * dt);
-        if still {
-            let measured = self.measure().joints_deg;
-            for j in 0..6 {
-                self.drive_bias[j] = (self.drive_bias[j] + DRIVE_KI * (sp[j] - measured[j]) * dt)
-                    .clamp(-DRIVE_BIAS_MAX, DRIVE_BIAS_MAX);
-            }
-        }
-        self.last_setpoint = Some(sp);
+        let positions = self.inner.scene().arm_positions();
+        let measured: [f64; 6] =
+            std::array::from_fn(|j| positions.get(j).map_or(0.0, |&v| v as f64));
+        self.integral.learn(sp, &measured, dt);
         if self.physics_steps.is_multiple_of(self.substeps as u64) {
             self.inner.scene().check_finite().map_err(sim)?;
             self.judge();

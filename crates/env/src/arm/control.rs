@@ -68,6 +68,15 @@ pub struct ControlConfig {
     /// Unset (the default): nothing is watched.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub collision_force_limit: Option<f32>,
+    /// What pressing costs, so that a policy learns to stay under a controller's collision
+    /// detection without its episodes ending while it explores: each step,
+    /// `collision_penalty · min(F / collision_penalty_force, 4)` is subtracted (reward term
+    /// `press`), with F the largest net external force on the robot that the collision sensor
+    /// read in the step (`contact_force`). A grasp's squeeze is internal and costs nothing; a
+    /// held cube's weight next to nothing. 0 (the default): pressing is free.
+    pub collision_penalty: f32,
+    /// The force (N) that costs `collision_penalty` per step.
+    pub collision_penalty_force: f32,
 }
 
 impl Default for ControlConfig {
@@ -87,6 +96,8 @@ impl Default for ControlConfig {
             drives: DrivesConfig::default(),
             speed_scales: vec![1.0],
             collision_force_limit: None,
+            collision_penalty: 0.0,
+            collision_penalty_force: 150.0,
         }
     }
 }
@@ -128,6 +139,18 @@ impl ControlConfig {
         if let Some(limit) = self.collision_force_limit {
             positive("control.collision_force_limit", limit, 1e5)?;
         }
+        if !(self.collision_penalty.is_finite() && (0.0..=100.0).contains(&self.collision_penalty))
+        {
+            return Err(EnvError::config(
+                "control.collision_penalty",
+                format!("must be in [0, 100], got {}", self.collision_penalty),
+            ));
+        }
+        positive(
+            "control.collision_penalty_force",
+            self.collision_penalty_force,
+            1e5,
+        )?;
         positive("control.servo.period_ms", self.servo.period_ms, 100.0)?;
         positive(
             "control.servo.max_joint_speed_deg_s",

@@ -6,7 +6,7 @@
 
 use crate::error::{EnvError, Result};
 use fairgrasp_sim::SimError;
-use fairgrasp_sim::control::{DriveFilter, JointTracking};
+use fairgrasp_sim::control::{DriveFilter, DriveIntegral, JointTracking};
 use fairgrasp_sim::scene::Scene;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -29,6 +29,10 @@ pub struct DrivesConfig {
     /// Every delay and lag of an episode is the nominal times one factor drawn from this
     /// range (no draw for one value): the identified model is a nominal, not the arm.
     pub scale: [f64; 2],
+    /// The drives' integral action (the twin's, [`DriveIntegral`]): a joint held off its set
+    /// point, on the table or an object, is pushed harder the longer it is held, up to 0.5°
+    /// more. On by default: the controller's drives do it and the twin models it.
+    pub integral: bool,
 }
 
 impl Default for DrivesConfig {
@@ -38,6 +42,7 @@ impl Default for DrivesConfig {
             delay_ms: [0.0; DRIVEN_JOINTS],
             tau_ms: [0.0; DRIVEN_JOINTS],
             scale: [1.0, 1.0],
+            integral: true,
         }
     }
 }
@@ -106,6 +111,8 @@ impl DrivesConfig {
             time: 0.0,
             set_point: start,
             set_at: 0.0,
+            integral: self.integral.then(DriveIntegral::new),
+            driven: None,
         };
         Ok(Some((drives, scale)))
     }
@@ -120,6 +127,9 @@ pub struct ArmDrives {
     set_point: [f64; DRIVEN_JOINTS],
     /// When the set point is reached (s): its servo period after it was sent.
     set_at: f64,
+    integral: Option<DriveIntegral<DRIVEN_JOINTS>>,
+    /// The drives' output in the last physics step (rad), for the integral to learn from.
+    driven: Option<[f64; DRIVEN_JOINTS]>,
 }
 
 impl ArmDrives {
@@ -134,8 +144,19 @@ impl ArmDrives {
     /// The drives' output for the coming physics step to the joints' targets; the clock moves
     /// on by the step.
     pub fn drive(&mut self, scene: &mut Scene) -> std::result::Result<(), SimError> {
+        let dt = scene.dt() as f64;
         let q = (self.filter).follow(&self.model, self.set_at, self.set_point, self.time);
-        self.time += scene.dt() as f64;
-        scene.set_arm_targets(&q.map(|v| v as f32))
+        self.time += dt;
+        let Some(integral) = self.integral.as_mut() else {
+            return scene.set_arm_targets(&q.map(|v| v as f32));
+        };
+        // The last step ended where the joints are now: learn from it, then drive this one.
+        if let Some(last) = self.driven {
+            let positions = scene.arm_positions();
+            let measured = std::array::from_fn(|j| positions.get(j).map_or(0.0, |&v| v as f64));
+            integral.learn(last, &measured, dt);
+        }
+        self.driven = Some(q);
+        scene.set_arm_targets(&integral.targets(&q).map(|v| v as f32))
     }
 }

@@ -711,14 +711,16 @@ impl<T: Task> Env for ArmEnv<T> {
             _ => 0,
         };
         let mut early = None;
-        let force_limit = self.config.control.collision_force_limit;
+        let control = &self.config.control;
+        let force_limit = control.collision_force_limit;
+        let watch_force = force_limit.is_some() || control.collision_penalty > 0.0;
         let mut peak_force: f32 = 0.0;
         let sensor = &mut episode.collision_sensor;
         let mut read_early = |scene: &Scene, done: u32| {
             if age > 0 && done == substeps - age {
                 early = Some(ArmState::from_scene(scene));
             }
-            if force_limit.is_some() {
+            if watch_force {
                 sensor.read(scene);
                 peak_force = peak_force.max(sensor.force());
             }
@@ -786,19 +788,24 @@ impl<T: Task> Env for ArmEnv<T> {
         }
         let privileged = self.privileged(&state, &normalised, speed_scale);
         let mut evaluation = self.task.evaluate(&self.scene, &state);
-        if let Some(limit) = force_limit {
+        if watch_force {
             evaluation.extras.set("contact_force", peak_force);
-            if peak_force > limit {
-                // The controller stops the arm: no success, whatever the task saw.
-                evaluation.success = false;
-                evaluation.failure = Some(EpisodeEvent::Collision);
-            }
+        }
+        if force_limit.is_some_and(|limit| peak_force > limit) {
+            // The controller stops the arm: no success, whatever the task saw.
+            evaluation.success = false;
+            evaluation.failure = Some(EpisodeEvent::Collision);
         }
         let max_steps = self.config.task.max_episode_steps();
         let episode = self.episode.as_mut().expect("checked");
         episode.steps += 1;
         let steps_left = max_steps.saturating_sub(episode.steps);
-        let reward_terms = self.task.reward(&evaluation, &state, steps_left);
+        let mut reward_terms = self.task.reward(&evaluation, &state, steps_left);
+        let control = &self.config.control;
+        if control.collision_penalty > 0.0 {
+            let pressed = (peak_force / control.collision_penalty_force).min(4.0);
+            reward_terms.set("press", -control.collision_penalty * pressed);
+        }
         let terminated = evaluation.success || evaluation.failure.is_some();
         let truncated = !terminated && episode.steps >= max_steps;
         episode.done = terminated || truncated;

@@ -99,6 +99,61 @@ impl<const N: usize> DriveFilter<N> {
     }
 }
 
+/// A drive's integral action, as an offset added to the set points the simulated joints follow.
+///
+/// The simulated joints are PD-controlled without gravity compensation, so they sag a few
+/// tenths of a degree below their targets; a real drive's integral action removes that, and so
+/// it also pushes harder the longer a joint is held off its set point (on the table, on an
+/// object). The term is slow, learnt only while the set point is nearly still, and bounded.
+/// The twin's world and training's `[control.drives]` both apply it. Radians and seconds.
+#[derive(Clone, Debug)]
+pub struct DriveIntegral<const N: usize> {
+    bias: [f64; N],
+    last: Option<[f64; N]>,
+}
+
+impl<const N: usize> Default for DriveIntegral<N> {
+    fn default() -> Self {
+        Self {
+            bias: [0.0; N],
+            last: None,
+        }
+    }
+}
+
+impl<const N: usize> DriveIntegral<N> {
+    /// Integral gain (1/s).
+    pub const GAIN: f64 = 4.0;
+    /// Largest correction (0.5°).
+    pub const MAX_BIAS: f64 = 0.5 * std::f64::consts::PI / 180.0;
+    /// The term learns only while the set point moves slower than this (5°/s).
+    pub const LEARN_SPEED: f64 = 5.0 * std::f64::consts::PI / 180.0;
+
+    /// No correction yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// What the joints are driven to for `set_point`: the set point plus the correction.
+    pub fn targets(&self, set_point: &[f64; N]) -> [f64; N] {
+        std::array::from_fn(|j| set_point[j] + self.bias[j])
+    }
+
+    /// Learns from one physics step of `dt` under `set_point` that ended at `measured`.
+    pub fn learn(&mut self, set_point: [f64; N], measured: &[f64; N], dt: f64) {
+        let still = self.last.is_some_and(|last| {
+            (last.iter().zip(&set_point)).all(|(a, b)| (a - b).abs() < Self::LEARN_SPEED * dt)
+        });
+        if still {
+            for j in 0..N {
+                self.bias[j] = (self.bias[j] + Self::GAIN * (set_point[j] - measured[j]) * dt)
+                    .clamp(-Self::MAX_BIAS, Self::MAX_BIAS);
+            }
+        }
+        self.last = Some(set_point);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -131,5 +186,34 @@ mod tests {
         let model = [JointTracking::default(); 2];
         let mut f = DriveFilter::new([0.0, 1.0], 0.0);
         assert_eq!(f.follow(&model, 0.004, [0.5, -1.0], 0.004), [0.5, -1.0]);
+    }
+
+    #[test]
+    fn the_integral_closes_a_steady_error_while_still_and_is_bounded() {
+        let mut i = DriveIntegral::<1>::new();
+        let dt = 0.001;
+        // A joint that sags 0.1° below a still set point: the correction grows towards it.
+        let sag = 0.1f64.to_radians();
+        for _ in 0..2000 {
+            let q = i.targets(&[0.0])[0] - sag;
+            i.learn([0.0], &[q], dt);
+        }
+        assert!(
+            (i.targets(&[0.0])[0] - sag).abs() < 0.01 * sag,
+            "{:?}",
+            i.bias
+        );
+        // Held far off (a joint pressed against the table), it stops at its bound.
+        for _ in 0..5000 {
+            i.learn([0.0], &[-0.1], dt);
+        }
+        assert_eq!(i.targets(&[0.0])[0], DriveIntegral::<1>::MAX_BIAS);
+        // A moving set point teaches nothing.
+        let mut moving = DriveIntegral::<1>::new();
+        for k in 0..1000 {
+            let sp = k as f64 * 0.2 * dt;
+            moving.learn([sp], &[sp - 0.1], dt);
+        }
+        assert_eq!(moving.targets(&[0.0]), [0.0]);
     }
 }

@@ -6,6 +6,6 @@ mod drives;
 mod gripper;
 mod ramp;
 
-pub use drives::{DriveFilter, JointTracking};
+pub use drives::{DriveFilter, DriveIntegral, JointTracking};
 pub use gripper::{FINGERS_FULL_SPEED_PERCENT_PER_S, GripperRamp};
 pub use ramp::JointRamp;
