@@ -10,6 +10,7 @@ use fairgrasp_deploy::calibration::Calibration;
 use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::evaluation::{Evaluation, evaluate};
+use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::wilson_lower_bound;
@@ -31,6 +32,11 @@ pub struct DeploymentEvalArgs {
     /// With --deployment: encoder noise on the streamed joints (deg).
     #[arg(long, default_value_t = 0.05, requires = "deployment")]
     pub joint_noise_deg: f64,
+    /// With --deployment: the controller as `fairgrasp twin --strict` sets it, as far as a
+    /// simulated clock models it: drives 8 ms behind their set points with a 15 ms lag, and
+    /// collision detection at 150 N (the network's faults are the real-time twin's).
+    #[arg(long, requires = "deployment")]
+    pub strict: bool,
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
@@ -52,6 +58,15 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     };
     let table = fairgrasp_rl::model::env_table(policy.env_config())?;
     let link = SimulatedController::new(policy.env_id(), &table, settings)?;
+    if d.strict {
+        for fault in fairgrasp_deploy::twin::faults::strict() {
+            match fault {
+                FaultCommand::Tracking(model) => link.set_tracking(model),
+                FaultCommand::CollisionLevelN(level) => link.set_collision_level(level),
+                _ => {}
+            }
+        }
+    }
     let started = std::time::Instant::now();
     let options = DeployOptions {
         live: true,
@@ -89,6 +104,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                 "speed_scale": d.speed_scale,
                 "latency_ms": [low, high],
                 "joint_noise_deg": d.joint_noise_deg,
+                "strict": d.strict,
                 "episodes": played,
                 "seed": args.seed,
                 "successes": successes,
@@ -101,9 +117,10 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         );
     } else {
         println!(
-            "{} through the deployment loop on the simulated controller (speed scale {}, \
+            "{} through the deployment loop on the simulated controller{} (speed scale {}, \
              latency {low:.0}-{high:.0} ms, encoder noise {} deg), {played} episodes from seed {}:",
             args.model.display(),
+            if d.strict { ", strict" } else { "" },
             d.speed_scale,
             d.joint_noise_deg,
             args.seed

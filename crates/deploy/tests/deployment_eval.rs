@@ -95,6 +95,35 @@ fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
     assert!(e.successes >= 1, "{e:?}");
 }
 
+/// The collision level is the simulated controller's to set (`eval --deployment --strict` sets
+/// the strict twin's): at 1 N, the touch of a grasp is a collision, and each stops its episode.
+#[test]
+fn a_controller_set_to_feel_a_touch_stops_every_grasp() {
+    let policy = Policy::load(&model_dir()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
+    let link =
+        SimulatedController::new(policy.env_id(), &table, SimulatedSettings::default()).unwrap();
+    link.set_collision_level(Some(1.0));
+    let options = DeployOptions {
+        live: true,
+        episodes: 2,
+        safety: SafetyConfig {
+            speed_scale: 1.0,
+            ..SafetyConfig::default()
+        },
+        after_success: AfterSuccess::Hold,
+        ..DeployOptions::default()
+    };
+    let calibration = Calibration::identity(&io.limits_rad);
+    let e = evaluate(&link, &model_dir(), &calibration, &options, 2_000_000_200).unwrap();
+    assert_eq!((e.played, e.successes), (2, 0), "{e:?}");
+    assert_eq!(e.faults.len(), 2, "{e:?}");
+    assert!(e.faults.iter().all(|f| f.contains("collision")), "{e:?}");
+    // Stopped on the way, not before it (a still arm feels nothing).
+    assert!(link.elapsed() > 0.5, "{} s", link.elapsed());
+}
+
 /// A pendant's override of 10 % caps servo motion at 18 deg/s: a stream at full speed would
 /// fall behind its set points into a following error. The loop sets the override to its own
 /// speed cap's share first.

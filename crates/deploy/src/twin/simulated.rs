@@ -278,6 +278,11 @@ impl SimulatedController {
         self.inner().controller.set_tracking(tracking);
     }
 
+    /// The collision detection's level (N; `None`: off), as the twin's `collision_level_n`.
+    pub fn set_collision_level(&self, newtons: Option<f64>) {
+        self.inner().controller.set_collision_level(newtons);
+    }
+
     /// A collision now, as the twin's `collision=1` fault: `collision_state` 1, `main_code`
     /// 201, the arm brakes, until `ResetAllError`.
     pub fn collide(&self) {
