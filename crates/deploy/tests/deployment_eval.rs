@@ -6,7 +6,7 @@ use fairgrasp_deploy::calibration::Calibration;
 use fairgrasp_deploy::robot::{RobotCommand, RobotLink};
 use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, Deployment, JsonLog, ModelIo};
 use fairgrasp_deploy::safety::SafetyConfig;
-use fairgrasp_deploy::twin::evaluation::evaluate;
+use fairgrasp_deploy::twin::evaluation::{Evaluation, evaluate};
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
 use fairgrasp_rl::policies::Policy;
 use std::path::PathBuf;
@@ -68,18 +68,21 @@ fn run_after(
     (grasped, report.episodes.len() as u32, link.elapsed())
 }
 
-/// A fault fails its episode only: the evaluation clears it as an operator would and plays on.
-#[test]
-fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
+/// `episodes` evaluated at speed scale 1 from held-out seed 2,000,000,200 on a simulated
+/// controller that `prepare` sets up first; the evaluation and the controller.
+fn evaluate_after(
+    episodes: u32,
+    prepare: impl FnOnce(&SimulatedController),
+) -> (Evaluation, SimulatedController) {
     let policy = Policy::load(&model_dir()).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
     let link =
         SimulatedController::new(policy.env_id(), &table, SimulatedSettings::default()).unwrap();
-    link.collide();
+    prepare(&link);
     let options = DeployOptions {
         live: true,
-        episodes: 3,
+        episodes,
         safety: SafetyConfig {
             speed_scale: 1.0,
             ..SafetyConfig::default()
@@ -89,6 +92,13 @@ fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
     };
     let calibration = Calibration::identity(&io.limits_rad);
     let e = evaluate(&link, &model_dir(), &calibration, &options, 2_000_000_200).unwrap();
+    (e, link)
+}
+
+/// A fault fails its episode only: the evaluation clears it as an operator would and plays on.
+#[test]
+fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
+    let (e, _) = evaluate_after(3, |link| link.collide());
     assert_eq!(e.played, 3, "{e:?}");
     assert_eq!(e.faults.len(), 1, "{e:?}");
     assert!(e.faults[0].contains("collision"), "{e:?}");
@@ -99,24 +109,7 @@ fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
 /// the strict twin's): at 1 N, the touch of a grasp is a collision, and each stops its episode.
 #[test]
 fn a_controller_set_to_feel_a_touch_stops_every_grasp() {
-    let policy = Policy::load(&model_dir()).unwrap();
-    let io = ModelIo::for_policy(&policy).unwrap();
-    let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
-    let link =
-        SimulatedController::new(policy.env_id(), &table, SimulatedSettings::default()).unwrap();
-    link.set_collision_level(Some(1.0));
-    let options = DeployOptions {
-        live: true,
-        episodes: 2,
-        safety: SafetyConfig {
-            speed_scale: 1.0,
-            ..SafetyConfig::default()
-        },
-        after_success: AfterSuccess::Hold,
-        ..DeployOptions::default()
-    };
-    let calibration = Calibration::identity(&io.limits_rad);
-    let e = evaluate(&link, &model_dir(), &calibration, &options, 2_000_000_200).unwrap();
+    let (e, link) = evaluate_after(2, |link| link.set_collision_level(Some(1.0)));
     assert_eq!((e.played, e.successes), (2, 0), "{e:?}");
     assert_eq!(e.faults.len(), 2, "{e:?}");
     assert!(e.faults.iter().all(|f| f.contains("collision")), "{e:?}");

@@ -193,7 +193,7 @@ impl World {
         let sp = setpoint.joints_deg.map(f64::to_radians);
         let scene = self.inner.scene_mut();
         let sim = |e| DeployError::Env(fairgrasp_env::EnvError::from(e));
-        let q = self.integral.targets(&sp).map(|v| v as f32);
+        let q = self.integral.drive(sp).map(|v| v as f32);
         scene.set_arm_targets(&q).map_err(sim)?;
         if setpoint.gripper_force_percent != self.gripper_force_percent {
             let nominal = scene.config().gripper.force_limit as f64;
@@ -209,10 +209,7 @@ impl World {
         scene.step_physics().map_err(sim)?;
         self.physics_steps += 1;
         self.read_contacts();
-        let positions = self.inner.scene().arm_positions();
-        let measured: [f64; 6] =
-            std::array::from_fn(|j| positions.get(j).map_or(0.0, |&v| v as f64));
-        self.integral.learn(sp, &measured, dt);
+        (self.integral).learn(&self.inner.scene().arm_positions(), dt);
         if self.physics_steps.is_multiple_of(self.substeps as u64) {
             self.inner.scene().check_finite().map_err(sim)?;
             self.judge();

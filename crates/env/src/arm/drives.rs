@@ -112,7 +112,6 @@ impl DrivesConfig {
             set_point: start,
             set_at: 0.0,
             integral: self.integral.then(DriveIntegral::new),
-            driven: None,
         };
         Ok(Some((drives, scale)))
     }
@@ -128,8 +127,6 @@ pub struct ArmDrives {
     /// When the set point is reached (s): its servo period after it was sent.
     set_at: f64,
     integral: Option<DriveIntegral<DRIVEN_JOINTS>>,
-    /// The drives' output in the last physics step (rad), for the integral to learn from.
-    driven: Option<[f64; DRIVEN_JOINTS]>,
 }
 
 impl ArmDrives {
@@ -151,12 +148,7 @@ impl ArmDrives {
             return scene.set_arm_targets(&q.map(|v| v as f32));
         };
         // The last step ended where the joints are now: learn from it, then drive this one.
-        if let Some(last) = self.driven {
-            let positions = scene.arm_positions();
-            let measured = std::array::from_fn(|j| positions.get(j).map_or(0.0, |&v| v as f64));
-            integral.learn(last, &measured, dt);
-        }
-        self.driven = Some(q);
-        scene.set_arm_targets(&integral.targets(&q).map(|v| v as f32))
+        integral.learn(&scene.arm_positions(), dt);
+        scene.set_arm_targets(&integral.drive(q).map(|v| v as f32))
     }
 }

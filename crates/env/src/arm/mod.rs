@@ -713,7 +713,9 @@ impl<T: Task> Env for ArmEnv<T> {
         let mut early = None;
         let control = &self.config.control;
         let force_limit = control.collision_force_limit;
-        let watch_force = force_limit.is_some() || control.collision_penalty > 0.0;
+        let press_cost = (control.collision_penalty > 0.0)
+            .then_some((control.collision_penalty, control.collision_penalty_force));
+        let watch_force = force_limit.is_some() || press_cost.is_some();
         let mut peak_force: f32 = 0.0;
         let sensor = &mut episode.collision_sensor;
         let mut read_early = |scene: &Scene, done: u32| {
@@ -801,10 +803,8 @@ impl<T: Task> Env for ArmEnv<T> {
         episode.steps += 1;
         let steps_left = max_steps.saturating_sub(episode.steps);
         let mut reward_terms = self.task.reward(&evaluation, &state, steps_left);
-        let control = &self.config.control;
-        if control.collision_penalty > 0.0 {
-            let pressed = (peak_force / control.collision_penalty_force).min(4.0);
-            reward_terms.set("press", -control.collision_penalty * pressed);
+        if let Some((penalty, force)) = press_cost {
+            reward_terms.set("press", -penalty * (peak_force / force).min(4.0));
         }
         let terminated = evaluation.success || evaluation.failure.is_some();
         let truncated = !terminated && episode.steps >= max_steps;

@@ -109,6 +109,9 @@ impl<const N: usize> DriveFilter<N> {
 #[derive(Clone, Debug)]
 pub struct DriveIntegral<const N: usize> {
     bias: [f64; N],
+    /// The set point of the step under way (given to [`Self::drive`], not yet learnt from).
+    driving: Option<[f64; N]>,
+    /// The set point of the last step learnt from.
     last: Option<[f64; N]>,
 }
 
@@ -116,6 +119,7 @@ impl<const N: usize> Default for DriveIntegral<N> {
     fn default() -> Self {
         Self {
             bias: [0.0; N],
+            driving: None,
             last: None,
         }
     }
@@ -134,20 +138,26 @@ impl<const N: usize> DriveIntegral<N> {
         Self::default()
     }
 
-    /// What the joints are driven to for `set_point`: the set point plus the correction.
-    pub fn targets(&self, set_point: &[f64; N]) -> [f64; N] {
+    /// The next physics step's joint targets for `set_point`: the set point plus the
+    /// correction.
+    pub fn drive(&mut self, set_point: [f64; N]) -> [f64; N] {
+        self.driving = Some(set_point);
         std::array::from_fn(|j| set_point[j] + self.bias[j])
     }
 
-    /// Learns from one physics step of `dt` under `set_point` that ended at `measured`.
-    pub fn learn(&mut self, set_point: [f64; N], measured: &[f64; N], dt: f64) {
+    /// Learns from the step [`Self::drive`] began, `dt` long, which ended with the joints at
+    /// `measured` (the scene's arm positions; nothing before the first step).
+    pub fn learn(&mut self, measured: &[f32], dt: f64) {
+        let Some(set_point) = self.driving.take() else {
+            return;
+        };
         let still = self.last.is_some_and(|last| {
             (last.iter().zip(&set_point)).all(|(a, b)| (a - b).abs() < Self::LEARN_SPEED * dt)
         });
         if still {
-            for j in 0..N {
-                self.bias[j] = (self.bias[j] + Self::GAIN * (set_point[j] - measured[j]) * dt)
-                    .clamp(-Self::MAX_BIAS, Self::MAX_BIAS);
+            for (j, (bias, sp)) in self.bias.iter_mut().zip(set_point).enumerate() {
+                let q = measured.get(j).map_or(0.0, |&v| v as f64);
+                *bias = (*bias + Self::GAIN * (sp - q) * dt).clamp(-Self::MAX_BIAS, Self::MAX_BIAS);
             }
         }
         self.last = Some(set_point);
@@ -194,26 +204,26 @@ mod tests {
         let dt = 0.001;
         // A joint that sags 0.1° below a still set point: the correction grows towards it.
         let sag = 0.1f64.to_radians();
+        let mut target = 0.0;
         for _ in 0..2000 {
-            let q = i.targets(&[0.0])[0] - sag;
-            i.learn([0.0], &[q], dt);
+            target = i.drive([0.0])[0];
+            i.learn(&[(target - sag) as f32], dt);
         }
-        assert!(
-            (i.targets(&[0.0])[0] - sag).abs() < 0.01 * sag,
-            "{:?}",
-            i.bias
-        );
+        assert!((target - sag).abs() < 0.01 * sag, "{:?}", i.bias);
         // Held far off (a joint pressed against the table), it stops at its bound.
         for _ in 0..5000 {
-            i.learn([0.0], &[-0.1], dt);
+            i.drive([0.0]);
+            i.learn(&[-0.1], dt);
         }
-        assert_eq!(i.targets(&[0.0])[0], DriveIntegral::<1>::MAX_BIAS);
-        // A moving set point teaches nothing.
+        assert_eq!(i.drive([0.0]), [DriveIntegral::<1>::MAX_BIAS]);
+        // A moving set point teaches nothing, nor does a step never driven.
         let mut moving = DriveIntegral::<1>::new();
         for k in 0..1000 {
             let sp = k as f64 * 0.2 * dt;
-            moving.learn([sp], &[sp - 0.1], dt);
+            moving.drive([sp]);
+            moving.learn(&[(sp - 0.1) as f32], dt);
+            moving.learn(&[-1.0], dt);
         }
-        assert_eq!(moving.targets(&[0.0]), [0.0]);
+        assert_eq!(moving.drive([0.0]), [0.0]);
     }
 }
