@@ -427,6 +427,49 @@ fn the_alignment_term_grows_with_the_folded_yaw_near_the_object() {
 }
 
 #[test]
+fn turning_the_gripper_costs_with_the_heading_change_and_holding_it_costs_nothing() {
+    let heading = |env: &GraspEnv| {
+        let x = env.state().unwrap().tcp.rotation * nalgebra_offset(1.0, 0.0, 0.0);
+        x.y.atan2(x.x)
+    };
+    let weight = 0.4;
+    let mut env = staged_cartesian(|r| r.turn = weight);
+    env.reset(Some(3)).unwrap();
+    let mut before = heading(&env);
+    let mut costs = Vec::new();
+    // Full turns one way, then the other, then held: each step's term follows the heading.
+    let held = [0.0; 12];
+    for &yaw in [1.0, 1.0, 1.0, -1.0, -0.3].iter().chain(&held) {
+        let step = env.step(&[0.0, 0.0, 0.0, yaw, 1.0]).unwrap();
+        let now = heading(&env);
+        let turned = (now - before + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        let expected = -weight * (turned.abs() / 0.1).min(1.0) as f32;
+        let got = step.info.reward_terms.value("turn");
+        assert!(
+            (got - expected).abs() < 1e-5,
+            "yaw {yaw}: {got} vs {expected}"
+        );
+        costs.push(got);
+        before = now;
+    }
+    // Full yaw steps cost most of the weight once the wrist is up to speed; once it comes to
+    // rest, nearly nothing.
+    assert!(costs[2] < -0.75 * weight, "{costs:?}");
+    assert!(costs[costs.len() - 1] > -0.02 * weight, "{costs:?}");
+    // Off by default: no term.
+    let mut plain = staged_cartesian(|_| {});
+    plain.reset(Some(3)).unwrap();
+    let step = plain.step(&[0.0, 0.0, 0.0, 1.0, 1.0]).unwrap();
+    assert_eq!(step.info.reward_terms.get("turn"), None);
+    // A negative weight is named.
+    let mut config = EnvConfig::default();
+    config.reward.turn = -1.0;
+    let err = GraspEnv::new(config).err().expect("refused");
+    assert!(err.to_string().contains("reward.turn"), "{err}");
+}
+
+#[test]
 fn random_shapes_draw_boxes_and_cylinders_in_range_and_show_their_size() {
     use fairgrasp_env::sim::scene::ObjectShape;
     let mut env = env_with(|c| c.shapes.enabled = true);

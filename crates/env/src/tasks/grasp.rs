@@ -18,9 +18,11 @@ use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
 use fairgrasp_sim::pick::{GraspStatus, SuccessRule, SuccessTracker};
+use fairgrasp_sim::rapier3d::na::{Isometry3, Vector3};
 use fairgrasp_sim::scene::Scene;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use std::f64::consts::{PI, TAU};
 
 /// The Gymnasium id of the grasp task.
 pub const ENV_ID: &str = "FaArmGrasp-v0";
@@ -200,7 +202,17 @@ pub struct GraspReward {
     /// default): an off-centre close is free, and the first finger to arrive shoves the object
     /// towards the other, which rapier forgives and MuJoCo's cell does not (docs/deployment.md).
     pub center: f32,
+    /// Staged and hybrid kinds: subtracted each step the gripper turns about the vertical,
+    /// `turn · min(1, |Δψ| / 0.1 rad)` with Δψ the TCP's heading change over the step (0.1 rad:
+    /// the Cartesian mode's largest yaw step by default). 0 (the default): turning is free,
+    /// and a policy may spin the wrist at full speed on its way down whatever the object's yaw,
+    /// sweeping the open fingers over the object's top, which a controller's collision
+    /// detection stops at low speed scales (docs/deployment.md).
+    pub turn: f32,
 }
+
+/// The heading change that costs `reward.turn` in full (rad).
+const FULL_TURN_RAD: f64 = 0.1;
 
 impl Default for GraspReward {
     fn default() -> Self {
@@ -218,6 +230,7 @@ impl Default for GraspReward {
             align: 0.0,
             push: 0.0,
             center: 0.0,
+            turn: 0.0,
         }
     }
 }
@@ -236,6 +249,7 @@ impl RewardSettings for GraspReward {
             ("reward.align", self.align),
             ("reward.push", self.push),
             ("reward.center", self.center),
+            ("reward.turn", self.turn),
         ] {
             check_non_negative(key, v)?;
         }
@@ -261,6 +275,15 @@ pub struct Grasp {
     previous_closing: bool,
     /// The object's offset between the pads at the previous step (for `reward.center`).
     previous_off_centre: Option<f64>,
+    /// The TCP's heading at the previous step (for `reward.turn`).
+    previous_heading: f64,
+}
+
+/// The TCP's heading about the vertical (rad): the direction of its x axis on the table,
+/// defined for any downward-pointing TCP (Euler angles flip near a top-down pose).
+fn heading(tcp: &Isometry3<f64>) -> f64 {
+    let x = tcp.rotation * Vector3::x();
+    x.y.atan2(x.x)
 }
 
 /// Object `i`'s offset along the fingers' axis (the TCP's y, m) while it sits between the
@@ -338,6 +361,7 @@ impl Task for Grasp {
             grasp_paid: false,
             previous_closing: false,
             previous_off_centre: None,
+            previous_heading: 0.0,
         })
     }
 
@@ -351,6 +375,7 @@ impl Task for Grasp {
         } else {
             None
         };
+        self.previous_heading = heading(&scene.tcp_pose());
         let tcp = scene.tcp_pose().translation.vector;
         self.previous_distance =
             (scene.object_state(0).pose.translation.vector - tcp).norm() as f32;
@@ -484,6 +509,13 @@ impl Task for Grasp {
                 if switched { -r.gripper_switch } else { 0.0 },
             );
         }
+        let now = heading(&state.tcp);
+        if r.turn > 0.0 && r.kind != RewardKind::Sparse {
+            let turned = (now - self.previous_heading + PI).rem_euclid(TAU) - PI;
+            let cost = (turned.abs() / FULL_TURN_RAD).min(1.0) as f32;
+            terms.set("turn", -r.turn * cost);
+        }
+        self.previous_heading = now;
         self.previous_closing = state.gripper_closing;
         self.previous_distance = distance;
         terms
