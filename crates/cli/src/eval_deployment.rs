@@ -37,6 +37,11 @@ pub struct DeploymentEvalArgs {
     /// collision detection at 150 N (the network's faults are the real-time twin's).
     #[arg(long, requires = "deployment")]
     pub strict: bool,
+    /// With --deployment: write the deployment loop's log (`fairgrasp deploy --log`: every
+    /// state, command and policy step) to this file; the loop restarted after a fault writes
+    /// to the next free `FILE.2.jsonl`, …, its episodes counted from 0 again.
+    #[arg(long, value_name = "FILE.jsonl", requires = "deployment")]
+    pub log: Option<std::path::PathBuf>,
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
@@ -79,7 +84,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         after_success: AfterSuccess::Hold,
         ..DeployOptions::default()
     };
-    let evaluation = evaluate(&link, &args.model, &calibration, &options, args.seed)?;
+    let evaluation = evaluate(
+        &link,
+        &args.model,
+        &calibration,
+        &options,
+        args.seed,
+        d.log.as_deref(),
+    )?;
     for why in &evaluation.mismatches {
         eprintln!("warning: {why}");
     }

@@ -73,6 +73,7 @@ fn run_after(
 fn evaluate_after(
     episodes: u32,
     prepare: impl FnOnce(&SimulatedController),
+    log: Option<&std::path::Path>,
 ) -> (Evaluation, SimulatedController) {
     let policy = Policy::load(&model_dir()).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
@@ -91,25 +92,53 @@ fn evaluate_after(
         ..DeployOptions::default()
     };
     let calibration = Calibration::identity(&io.limits_rad);
-    let e = evaluate(&link, &model_dir(), &calibration, &options, 2_000_000_200).unwrap();
+    let e = evaluate(
+        &link,
+        &model_dir(),
+        &calibration,
+        &options,
+        2_000_000_200,
+        log,
+    )
+    .unwrap();
     (e, link)
 }
 
 /// A fault fails its episode only: the evaluation clears it as an operator would and plays on.
+/// The log shows both loops: the faulted one in the file asked for, the next beside it.
 #[test]
 fn a_fault_fails_its_episode_and_the_evaluation_goes_on() {
-    let (e, _) = evaluate_after(3, |link| link.collide());
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("eval.jsonl");
+    let (e, _) = evaluate_after(3, |link| link.collide(), Some(&log));
     assert_eq!(e.played, 3, "{e:?}");
     assert_eq!(e.faults.len(), 1, "{e:?}");
     assert!(e.faults[0].contains("collision"), "{e:?}");
     assert!(e.successes >= 1, "{e:?}");
+    let records = |name: &str| -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(dir.path().join(name)).unwrap();
+        text.lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    };
+    let first = records("eval.jsonl");
+    assert!(
+        first
+            .iter()
+            .any(|r| r["fault"].as_str().is_some_and(|f| f.contains("collision"))),
+        "the first loop's log names its fault"
+    );
+    let next = records("eval.2.jsonl");
+    let steps = next.iter().filter(|r| r["step"]["obs"].is_array()).count();
+    assert!(steps > 0, "the next loop logged its policy steps");
+    assert!(next.iter().all(|r| r.get("fault").is_none()));
 }
 
 /// The collision level is the simulated controller's to set (`eval --deployment --strict` sets
 /// the strict twin's): at 1 N, the touch of a grasp is a collision, and each stops its episode.
 #[test]
 fn a_controller_set_to_feel_a_touch_stops_every_grasp() {
-    let (e, link) = evaluate_after(2, |link| link.set_collision_level(Some(1.0)));
+    let (e, link) = evaluate_after(2, |link| link.set_collision_level(Some(1.0)), None);
     assert_eq!((e.played, e.successes), (2, 0), "{e:?}");
     assert_eq!(e.faults.len(), 2, "{e:?}");
     assert!(e.faults.iter().all(|f| f.contains("collision")), "{e:?}");

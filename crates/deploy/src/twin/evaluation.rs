@@ -28,13 +28,15 @@ pub struct Evaluation {
 }
 
 /// Plays `options.episodes` episodes of the model in `model` on `link`, episode `i` placed from
-/// `seed + i`.
+/// `seed + i`. With `log`, each loop writes the deployment's log there (a loop started after a
+/// fault to the next free numbered file beside it, its episodes counted from 0 again).
 pub fn evaluate(
     link: &SimulatedController,
     model: &Path,
     calibration: &Calibration,
     options: &DeployOptions,
     seed: u64,
+    log: Option<&Path>,
 ) -> Result<Evaluation> {
     let mut out = Evaluation::default();
     while out.played < options.episodes {
@@ -46,7 +48,7 @@ pub fn evaluate(
                 episodes: options.episodes - out.played,
                 ..options.clone()
             },
-            JsonLog::create(None)?,
+            JsonLog::create(log)?,
             Arc::new(AtomicBool::new(false)),
         )?;
         if out.played == 0 {
