@@ -259,7 +259,7 @@ impl Driver {
     /// Observe, act, map, ramp: the rest of a control step.
     fn act(&mut self) -> PyResult<Output> {
         let episode = self.episode.as_mut().expect("begin() made the episode");
-        let obs = self.io.observe(&episode.state, &episode.shown);
+        let obs = self.io.observe(&episode.state, &episode.shown, 1.0);
         let output = self.policy.act(&obs, true).map_err(rl_error)?;
         if let Some(i) = output.iter().position(|v| !v.is_finite()) {
             return Err(PyRuntimeError::new_err(format!(

@@ -41,8 +41,31 @@ fn pose_message(env: &RescaleAction<GraspEnv>) -> PoseMessage {
 
 #[test]
 fn training_and_deployment_build_the_same_observation_from_the_same_state() {
-    let io = ModelIo::for_config(config()).unwrap();
-    let mut env = RescaleAction::new(GraspEnv::new(config()).unwrap()).unwrap();
+    same_observations(config());
+}
+
+/// A policy that observes its speed scale sees the deployment's where training showed the
+/// episode's.
+#[test]
+fn the_speed_scale_observed_is_the_deployments() {
+    let mut observed = config();
+    observed.control.observe_speed_scale = true;
+    let plain = ModelIo::for_config(config()).unwrap();
+    let io = ModelIo::for_config(observed.clone()).unwrap();
+    let state = &io.nominal;
+    let shown = vec![0.0; 5];
+    let with = io.observe(state, &shown, 0.25);
+    let without = plain.observe(state, &shown, 0.25);
+    assert_eq!(with.len(), without.len() + 1);
+    assert_eq!(with[..without.len()], without[..]);
+    assert_eq!(with.last(), Some(&0.25));
+    assert_eq!(io.observe(state, &shown, 1.0).last(), Some(&1.0));
+    same_observations(observed);
+}
+
+fn same_observations(config: GraspConfig) {
+    let io = ModelIo::for_config(config.clone()).unwrap();
+    let mut env = RescaleAction::new(GraspEnv::new(config).unwrap()).unwrap();
     let limits: Vec<(f64, f64)> = (io.limits_rad.iter())
         .map(|&(lo, hi)| (lo as f64, hi as f64))
         .collect();
@@ -73,7 +96,7 @@ fn training_and_deployment_build_the_same_observation_from_the_same_state() {
             let now = t0 + Duration::from_secs_f64(t);
             let state =
                 reader.estimate(&io, &calibration, &robot, &pose_message(&env), closing, now);
-            let deployed = io.observe(&state, &shown);
+            let deployed = io.observe(&state, &shown, 1.0);
             assert_eq!(deployed, obs, "episode {episode}, step {step}");
             compared += 1;
             held += state.objects[0].pad_contacts[0] as u32;

@@ -89,7 +89,7 @@ fn the_privileged_state_is_the_true_state_s_observation_and_the_policy_never_rea
             let (obs, info) = env.reset(Some(seed)).unwrap();
             let scale = info.extras.value("param/speed_scale");
             let zeros = vec![0.0; env.action_space().dim()];
-            let mut want = env.observation_of(env.state().unwrap(), &zeros);
+            let mut want = env.observation_of(env.state().unwrap(), &zeros, scale);
             want.push(scale);
             steps.push((obs, info.privileged, want));
             let mut policy = ScriptedGraspPolicy::new(&env);
@@ -98,7 +98,7 @@ fn the_privileged_state_is_the_true_state_s_observation_and_the_policy_never_rea
                 let step = env.step(&action).unwrap();
                 let high = &env.action_space().high;
                 let normalised: Vec<f32> = action.iter().zip(high).map(|(a, h)| a / h).collect();
-                let mut want = env.observation_of(env.state().unwrap(), &normalised);
+                let mut want = env.observation_of(env.state().unwrap(), &normalised, scale);
                 want.push(scale);
                 steps.push((step.obs, step.info.privileged, want));
                 if step.terminated || step.truncated {

@@ -112,3 +112,30 @@ fn bad_scales_name_their_key() {
         assert!(e.to_string().contains("control.speed_scales"), "{e}");
     }
 }
+
+/// With `observe_speed_scale` the observation ends with each episode's drawn scale, and is
+/// otherwise the one without it.
+#[test]
+fn a_policy_that_observes_the_speed_scale_sees_each_episodes() {
+    let plain_dim = env_at(&[0.25, 1.0]).observation_space().dim();
+    let mut config = GraspConfig::default();
+    config.control.action_mode = ActionMode::Joint;
+    config.control.servo.enabled = true;
+    config.readings.enabled = true;
+    config.control.speed_scales = vec![0.25, 1.0];
+    config.control.observe_speed_scale = true;
+    let mut env = GraspEnv::new(config).unwrap();
+    assert_eq!(env.observation_space().dim(), plain_dim + 1);
+    let mut seen = Vec::new();
+    for seed in 0..8 {
+        let (obs, info) = env.reset(Some(seed)).unwrap();
+        let scale = info.extras.value("param/speed_scale");
+        assert_eq!(obs.last(), Some(&scale), "seed {seed} at reset");
+        let mut action = vec![0.0; 7];
+        action[6] = 1.0;
+        let step = env.step(&action).unwrap();
+        assert_eq!(step.obs.last(), Some(&scale), "seed {seed} after a step");
+        seen.push(scale);
+    }
+    assert!(seen.contains(&0.25) && seen.contains(&1.0), "{seen:?}");
+}

@@ -623,7 +623,7 @@ impl Deployment {
                     break;
                 }
             }
-            let obs = self.io.observe(&state, &shown);
+            let obs = (self.io).observe(&state, &shown, self.options.safety.speed_scale);
             let output = self.policy.act(&obs, true).map_err(|e| Fault::CallFailed {
                 call: "policy".into(),
                 message: e.to_string(),

@@ -227,10 +227,10 @@ impl ModelIo {
         self.env.inner().mapper().config().action_mode
     }
 
-    /// The observation for a state, the previous action given as the env gives it (each value
-    /// divided by its bound).
-    pub fn observe(&self, state: &ArmState, previous: &[f32]) -> Vec<f32> {
-        self.env.inner().observation_of(state, previous)
+    /// The observation for a state at the deployment's speed scale, the previous action given
+    /// as the env gives it (each value divided by its bound).
+    pub fn observe(&self, state: &ArmState, previous: &[f32], speed_scale: f64) -> Vec<f32> {
+        (self.env.inner()).observation_of(state, previous, speed_scale as f32)
     }
 
     /// The env action for a policy output (clipped into [-1, 1], rescaled to the env's

@@ -62,6 +62,11 @@ pub struct ControlConfig {
     /// simulator's, as on the arm. Physics costs the mean of 1/s. Below 1 it needs
     /// `[readings]`, which reads speeds in the policy's time.
     pub speed_scales: Vec<f32>,
+    /// The observation ends with the episode's speed scale (the deployment passes its own):
+    /// at scale s the drives lag, the fingers close and the object moves 1/s times faster in
+    /// the policy's time, so a policy that sees s can act for the arm it drives. Off (the
+    /// default): one behaviour for every scale.
+    pub observe_speed_scale: bool,
     /// A cobot's collision detection (N): the episode ends, failed with
     /// [`EpisodeEvent::Collision`](crate::core::EpisodeEvent::Collision), when a robot link
     /// presses on an object, the table or a bin with more than this force in any physics step.
@@ -95,6 +100,7 @@ impl Default for ControlConfig {
             gripper: GripperConfig::default(),
             drives: DrivesConfig::default(),
             speed_scales: vec![1.0],
+            observe_speed_scale: false,
             collision_force_limit: None,
             collision_penalty: 0.0,
             collision_penalty_force: 150.0,

@@ -66,7 +66,12 @@ pub trait ArmTaskEnv: Env {
     fn readings(&self) -> &ReadingsConfig;
     fn max_episode_steps(&self) -> u32;
     /// The observation of a state read outside the simulator ([`ArmEnv::observation_of`]).
-    fn observation_of(&self, state: &ArmState, previous_action: &[f32]) -> Vec<f32>;
+    fn observation_of(
+        &self,
+        state: &ArmState,
+        previous_action: &[f32],
+        speed_scale: f32,
+    ) -> Vec<f32>;
     /// The task's success rule for a new episode; `None` when it needs the simulator.
     fn success_judge(&self) -> Option<Box<dyn SuccessJudge>>;
 }
@@ -92,8 +97,13 @@ impl<T: Task> ArmTaskEnv for ArmEnv<T> {
         self.config.task.max_episode_steps()
     }
 
-    fn observation_of(&self, state: &ArmState, previous_action: &[f32]) -> Vec<f32> {
-        ArmEnv::observation_of(self, state, previous_action)
+    fn observation_of(
+        &self,
+        state: &ArmState,
+        previous_action: &[f32],
+        speed_scale: f32,
+    ) -> Vec<f32> {
+        ArmEnv::observation_of(self, state, previous_action, speed_scale)
     }
 
     fn success_judge(&self) -> Option<Box<dyn SuccessJudge>> {

@@ -202,6 +202,21 @@ fn reported(mapper: &ActionMapper, state: &ArmState, offset: &[f32]) -> Option<A
     Some(reported)
 }
 
+/// The task's observation of `state`, then the speed scale when the policy observes it.
+fn write_observation<T: Task>(
+    task: &T,
+    observe_speed_scale: bool,
+    state: &ArmState,
+    previous_action: &[f32],
+    speed_scale: f32,
+    out: &mut ObsWriter,
+) {
+    task.observe(state, previous_action, out);
+    if observe_speed_scale {
+        out.push1(NoiseGroup::None, speed_scale);
+    }
+}
+
 fn gaussian(rng: &mut impl Rng) -> f32 {
     let u1: f32 = rng.random::<f32>().max(1e-12);
     let u2: f32 = rng.random();
@@ -239,9 +254,12 @@ impl<T: Task> ArmEnv<T> {
         let facts = EstimatorFacts::new(chain.clone(), &state);
         let (mut obs, mut noise_groups) = (Vec::new(), Vec::new());
         let zeros = vec![0.0; action_space.dim()];
-        task.observe(
+        write_observation(
+            &task,
+            config.control.observe_speed_scale,
             &state,
             &zeros,
+            1.0,
             &mut ObsWriter::recording(&mut obs, &mut noise_groups),
         );
         let mut high = vec![0.0; obs.len()];
@@ -295,15 +313,36 @@ impl<T: Task> ArmEnv<T> {
         self.episode.as_ref().map(|e| &e.state)
     }
 
-    /// The observation for a state read outside the simulator (the deployment loop), with the
-    /// previous action normalised as in [`Env::step`] (each value divided by its action-space
-    /// bound). No observation noise is added.
-    pub fn observation_of(&self, state: &ArmState, previous_action: &[f32]) -> Vec<f32> {
+    /// The observation for a state read outside the simulator (the deployment loop) at speed
+    /// scale `speed_scale`, with the previous action normalised as in [`Env::step`] (each value
+    /// divided by its action-space bound). No observation noise is added.
+    pub fn observation_of(
+        &self,
+        state: &ArmState,
+        previous_action: &[f32],
+        speed_scale: f32,
+    ) -> Vec<f32> {
         let mut obs = Vec::with_capacity(self.observation_space.dim());
-        self.task
-            .observe(state, previous_action, &mut ObsWriter::new(&mut obs));
+        self.write_observation(state, previous_action, speed_scale, &mut obs);
         self.observation_space.clip(&mut obs);
         obs
+    }
+
+    fn write_observation(
+        &self,
+        state: &ArmState,
+        previous_action: &[f32],
+        speed_scale: f32,
+        obs: &mut Vec<f32>,
+    ) {
+        write_observation(
+            &self.task,
+            self.config.control.observe_speed_scale,
+            state,
+            previous_action,
+            speed_scale,
+            &mut ObsWriter::new(obs),
+        );
     }
 
     /// The state as the controller reports it, which the last observation was computed from:
@@ -433,10 +472,9 @@ impl<T: Task> ArmEnv<T> {
         }
     }
 
-    fn observe(&mut self, state: &ArmState, previous_action: &[f32]) -> Vec<f32> {
+    fn observe(&mut self, state: &ArmState, previous_action: &[f32], speed_scale: f32) -> Vec<f32> {
         let mut obs = Vec::with_capacity(self.observation_space.dim());
-        self.task
-            .observe(state, previous_action, &mut ObsWriter::new(&mut obs));
+        self.write_observation(state, previous_action, speed_scale, &mut obs);
         self.add_noise(&mut obs);
         self.observation_space.clip(&mut obs);
         obs
@@ -481,7 +519,7 @@ impl<T: Task> ArmEnv<T> {
         if !self.config.readings.privileged {
             return Vec::new();
         }
-        let mut values = self.observation_of(state, previous_action);
+        let mut values = self.observation_of(state, previous_action, speed_scale);
         values.push(speed_scale);
         values
     }
@@ -616,7 +654,7 @@ impl<T: Task> Env for ArmEnv<T> {
         }
         let command = self.mapper.hold(view, targets);
         let previous_action = vec![0.0; self.action_space.dim()];
-        let obs = self.observe(view, &previous_action);
+        let obs = self.observe(view, &previous_action, speed_scale);
         let privileged = self.privileged(&state, &previous_action, speed_scale);
         let no_op = self.no_op_action();
         let ramp = self.config.control.servo.ramp(&self.scene, speed_scale);
@@ -784,7 +822,7 @@ impl<T: Task> Env for ArmEnv<T> {
             _ => None,
         };
         let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
-        let obs = self.observe(view, &normalised);
+        let obs = self.observe(view, &normalised, speed_scale);
         if obs.iter().any(|v| !v.is_finite()) {
             return Ok(self.non_finite_step());
         }
