@@ -509,13 +509,13 @@ impl Task for Grasp {
                 if switched { -r.gripper_switch } else { 0.0 },
             );
         }
-        let now = heading(&state.tcp);
         if r.turn > 0.0 && r.kind != RewardKind::Sparse {
+            let now = heading(&state.tcp);
             let turned = (now - self.previous_heading + PI).rem_euclid(TAU) - PI;
             let cost = (turned.abs() / FULL_TURN_RAD).min(1.0) as f32;
             terms.set("turn", -r.turn * cost);
+            self.previous_heading = now;
         }
-        self.previous_heading = now;
         self.previous_closing = state.gripper_closing;
         self.previous_distance = distance;
         terms
