@@ -30,6 +30,14 @@ const SEARCH_BEFORE_S: f64 = 0.05;
 const SEARCH_AFTER_S: f64 = 0.1;
 /// Stopping further open than this (%) with nothing between the fingers is a stall.
 const STALL_PERCENT: f64 = 3.0;
+/// The set points go out this much slower than the safety filter's period, so that their
+/// arrivals drift across the controller's stream frames (0.125 ms a tick on the 8 ms stream,
+/// a whole frame every 64 ticks): some arrive just before a frame and some just after, and the
+/// clock offset is bounded as tightly from both sides. Sent on the stream's own period, the
+/// phase stayed put and the offset came out up to 0.7 ms off (the simulated controller at a
+/// fixed 0.5 ms latency), which the fit read as the arm's delay. Slower ticks only lower the
+/// filter's speeds and accelerations.
+const SEND_STRETCH: f64 = 1.0 + 1.0 / 64.0;
 
 /// One set point sent.
 #[derive(Clone, Debug, PartialEq)]
@@ -423,7 +431,8 @@ impl Run<'_> {
     ) -> std::result::Result<(), Fault> {
         let start = self.recording.start_deg;
         filter.start(&start)?;
-        let (_, _, period) = filter.caps();
+        let (_, _, filter_period) = filter.caps();
+        let period = filter_period * SEND_STRETCH;
         // A pendant's low override would cap the excitation and read as the drives' lag.
         let percent = filter.speed_override_percent();
         self.send(&RobotCommand::SetSpeed { percent })?;

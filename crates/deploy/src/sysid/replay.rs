@@ -20,6 +20,26 @@ const SETTLE_S: f64 = 1.0;
 /// The replay starts this long before the first set point (s).
 const LEAD_S: f64 = 0.05;
 
+/// Where the stream's frames fall on a grid of step `dt` (s, in `[0, dt)`): the circular mean of
+/// their times modulo `dt`. A twin takes its frames on its physics step, and a replay stepped on
+/// the same grid applies each set point on the same step and is read without interpolating
+/// (on another grid the fit's best split of delay and lag moved by up to 19 % with exact
+/// clocks and no noise). A real controller's frames fall anywhere on it, and any phase serves.
+fn grid_phase(times: &[f64], dt: f64) -> f64 {
+    let (mut sin, mut cos) = (0.0, 0.0);
+    for &t in times {
+        let angle = std::f64::consts::TAU * (t / dt).fract();
+        sin += angle.sin();
+        cos += angle.cos();
+    }
+    let phase = sin.atan2(cos) / std::f64::consts::TAU * dt;
+    if phase.is_finite() {
+        phase.rem_euclid(dt)
+    } else {
+        0.0
+    }
+}
+
 /// The simulated arm a recording is replayed through.
 #[derive(Clone, Debug)]
 pub struct ArmSim {
@@ -44,8 +64,8 @@ impl ArmSim {
         let first = commands.first().ok_or_else(|| {
             DeployError::config("system identification", "the recording has no set point")
         })?;
-        let until = recording
-            .state_times()
+        let times = recording.state_times();
+        let until = times
             .last()
             .copied()
             .unwrap_or(first.t)
@@ -62,7 +82,8 @@ impl ArmSim {
         for _ in 0..(SETTLE_S / dt).round() as usize {
             world.step(&hold)?;
         }
-        let t0 = first.t - LEAD_S;
+        let phase = grid_phase(&times, dt);
+        let t0 = phase + ((first.t - LEAD_S - phase) / dt).floor() * dt;
         let steps = ((until - t0) / dt).ceil().max(1.0) as usize + 1;
         // The controller's interpolation of each ServoJ: a straight line from where its set
         // point is when the command arrives to the target, over cmdT.
@@ -98,5 +119,25 @@ impl ArmSim {
             }
         }
         Ok(out.map(|values| Uniform { t0, dt, values }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::grid_phase;
+
+    #[test]
+    fn the_frames_grid_is_found_through_millisecond_clocks() {
+        let dt = 1.0 / 240.0;
+        for phase in [0.0, 0.0013, 0.004] {
+            // Frames every second step, their clocks rounded to the millisecond.
+            let times: Vec<f64> = (0..2000)
+                .map(|k| ((100.0 + phase + 2.0 * k as f64 * dt) * 1e3).round() / 1e3)
+                .collect();
+            let found = grid_phase(&times, dt);
+            let off = (found - phase + 0.5 * dt).rem_euclid(dt) - 0.5 * dt;
+            assert!(off.abs() < 5e-5, "phase {phase} s, found {found} s");
+        }
+        assert_eq!(grid_phase(&[], dt), 0.0);
     }
 }
