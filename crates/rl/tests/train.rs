@@ -513,3 +513,78 @@ fn a_privileged_critic_trains_saves_and_resumes_and_the_policy_reads_the_observa
         "{err}"
     );
 }
+
+/// SHA-256 of a run's final weights: every tensor by name, its shape and its `f32` values.
+fn weights_sha256(run: &Path) -> String {
+    use sha2::{Digest, Sha256};
+    let tensors = load_tensors(&run.join("final/model.safetensors")).unwrap();
+    let mut names: Vec<&String> = tensors.keys().collect();
+    names.sort();
+    let mut hash = Sha256::new();
+    for name in names {
+        let t = &tensors[name];
+        hash.update(name.as_bytes());
+        for d in t.dims() {
+            hash.update((*d as u64).to_le_bytes());
+        }
+        for v in t.flatten_all().unwrap().to_vec1::<f32>().unwrap() {
+            hash.update(v.to_le_bytes());
+        }
+    }
+    format!("{:x}", hash.finalize())
+}
+
+/// Short runs of the shipped configs train the weights pinned here, so that a change meant to
+/// leave behaviour alone (a refactor, a faster kernel) shows when it does not: the same seed
+/// must keep training the same policy for every user. A change that means to move them updates
+/// the hashes and says why in its commit.
+#[test]
+fn short_runs_of_the_shipped_configs_train_pinned_weights() {
+    let short = ["threads=1", "checkpoint_freq=1000000", "eval.freq=1000000"];
+    let cases: [(&str, String, &[&str], &str); 4] = [
+        (
+            "ppo (the default)",
+            fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, "ppo")
+                .unwrap()
+                .to_string(),
+            &["total_timesteps=4096"],
+            "ec0d4a6c1f1316e3f43642a6dd2bbe0b55a076d2524ff032df4558e4220c2463",
+        ),
+        (
+            "ppo_deploy.toml",
+            include_str!("../../../configs/ppo_deploy.toml").to_string(),
+            &["total_timesteps=4096"],
+            "840793c9fd1fa073e017128e08dd3bc06a2c018cf9ba2127ebd0139209e1b452",
+        ),
+        (
+            "sac",
+            fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, "sac")
+                .unwrap()
+                .to_string(),
+            &["total_timesteps=1024", "sac.learning_starts=512"],
+            "1b01911419523d84245d0fb61a98604e9a58abb179e80c21c98fe600f4421c6e",
+        ),
+        (
+            "td3",
+            fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, "td3")
+                .unwrap()
+                .to_string(),
+            &["total_timesteps=1024", "td3.learning_starts=512"],
+            "f0a6bcb2824cb245d1146416ddaa2a9dd2b678ccf53d1b24a56b14291481ba4b",
+        ),
+    ];
+    let mut moved = Vec::new();
+    for (name, text, overrides, pinned) in cases {
+        let overrides: Vec<String> = (short.iter().chain(overrides))
+            .map(|o| o.to_string())
+            .collect();
+        let config = TrainConfig::from_toml_str(&text, &overrides).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        train(&config, dir.path(), |_| {}).unwrap();
+        let found = weights_sha256(dir.path());
+        if found != pinned {
+            moved.push(format!("{name}: {found}"));
+        }
+    }
+    assert!(moved.is_empty(), "the weights moved:\n{}", moved.join("\n"));
+}
