@@ -97,11 +97,6 @@ impl NamedValues {
         self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
     }
 
-    /// `get`, with 0 for a missing name.
-    pub fn value(&self, name: &str) -> f32 {
-        self.get(name).unwrap_or(0.0)
-    }
-
     pub fn iter(&self) -> impl ExactSizeIterator<Item = (&str, f32)> {
         self.0.iter().map(|(n, v)| (n.as_ref(), *v))
     }

@@ -104,7 +104,8 @@ fn each_episode_draws_its_scale_and_reports_it() {
                 .unwrap()
                 .1
                 .extras
-                .value("param/drive_scale")
+                .get("param/drive_scale")
+                .unwrap()
         })
         .collect();
     assert!(scales.iter().all(|s| (0.5..1.5).contains(s)), "{scales:?}");
@@ -115,7 +116,8 @@ fn each_episode_draws_its_scale_and_reports_it() {
         .unwrap()
         .1
         .extras
-        .value("param/drive_scale");
+        .get("param/drive_scale")
+        .unwrap();
     assert_eq!(again, scales[0]);
 }
 

@@ -215,17 +215,17 @@ fn hybrid_reward_terms_sum_up_and_one_time_bonuses_are_paid_once() {
         let t = &step.info.reward_terms;
         let x = &step.info.extras;
         assert!((t.total() - step.reward).abs() < 1e-6);
-        assert!((t.value("time") + 0.01).abs() < 1e-6);
-        if t.value("grasp") > 0.0 {
+        assert!((t.get("time").unwrap() + 0.01).abs() < 1e-6);
+        if t.get("grasp").unwrap() > 0.0 {
             grasp_bonuses += 1;
-            assert_eq!(x.value("grasped"), 1.0);
+            assert_eq!(x.get("grasped").unwrap(), 1.0);
         }
-        if t.value("lift_hold") > 0.0 {
+        if t.get("lift_hold").unwrap() > 0.0 {
             lift_bonuses += 1;
             assert!(step.info.success);
         }
-        if x.value("ee_object_distance") < 0.1 {
-            assert_eq!(t.value("near"), 0.5);
+        if x.get("ee_object_distance").unwrap() < 0.1 {
+            assert_eq!(t.get("near").unwrap(), 0.5);
         }
         if step.terminated || step.truncated {
             assert!(step.info.success && step.terminated);
@@ -262,7 +262,7 @@ fn an_object_that_leaves_the_table_terminates_with_a_penalty() {
     let step = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
     assert!(step.terminated);
     assert!(step.info.events.contains(&EpisodeEvent::ObjectOffTable));
-    assert_eq!(step.info.reward_terms.value("off_table"), -10.0);
+    assert_eq!(step.info.reward_terms.get("off_table").unwrap(), -10.0);
 }
 
 #[test]
@@ -345,12 +345,12 @@ fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages()
         first.get_or_insert(step.reward);
         if step.terminated || step.truncated {
             assert!(step.info.success);
-            assert_eq!(t.value("success"), 10.0);
+            assert_eq!(t.get("success").unwrap(), 10.0);
             break;
         }
         assert!(step.reward <= 0.0 && step.reward >= -1.0, "{}", step.reward);
-        if step.info.extras.value("grasped") > 0.0 {
-            assert!(t.value("grasp") > 0.0);
+        if step.info.extras.get("grasped").unwrap() > 0.0 {
+            assert!(t.get("grasp").unwrap() > 0.0);
         }
         best_before_success = best_before_success.max(step.reward);
     }
@@ -367,7 +367,7 @@ fn staged_reward_is_never_positive_before_success_and_rises_through_the_stages()
     env.reset(Some(2)).unwrap();
     let step = env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]).unwrap();
     assert!(step.terminated);
-    assert_eq!(step.info.reward_terms.value("off_table"), -99.0);
+    assert_eq!(step.info.reward_terms.get("off_table").unwrap(), -99.0);
 }
 
 #[test]
@@ -411,7 +411,7 @@ fn the_alignment_term_grows_with_the_folded_yaw_near_the_object() {
         let folded = (yaw + quarter).rem_euclid(2.0 * quarter) - quarter;
         let d = s.tcp_to_object(0).norm() as f32;
         let expected = -weight * (folded.abs() / quarter) as f32 * (1.0 - (4.0 * d).tanh());
-        let got = step.info.reward_terms.value("align");
+        let got = step.info.reward_terms.get("align").unwrap();
         assert!(
             (got - expected).abs() < 1e-5,
             "seed {seed}: {got} vs {expected}"
@@ -445,7 +445,7 @@ fn turning_the_gripper_costs_with_the_heading_change_and_holding_it_costs_nothin
         let turned = (now - before + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
             - std::f64::consts::PI;
         let expected = -weight * (turned.abs() / 0.1).min(1.0) as f32;
-        let got = step.info.reward_terms.value("turn");
+        let got = step.info.reward_terms.get("turn").unwrap();
         assert!(
             (got - expected).abs() < 1e-5,
             "yaw {yaw}: {got} vs {expected}"
@@ -612,7 +612,7 @@ fn the_push_term_follows_the_objects_sliding_speed_until_it_is_grasped() {
             } else {
                 -weight * (v / 0.05).min(1.0)
             };
-            let got = step.info.reward_terms.value("push");
+            let got = step.info.reward_terms.get("push").unwrap();
             assert!((got - expected).abs() < 1e-6, "{got} vs {expected}");
             pushes.push(got);
             if step.terminated || step.truncated {
@@ -674,7 +674,7 @@ fn the_centre_term_costs_a_close_commanded_off_the_objects_centre() {
         for (target, gripper, steps) in plan {
             for _ in 0..steps {
                 let step = step_towards(&mut env, target, gripper);
-                costs.push(step.info.reward_terms.value("center"));
+                costs.push(step.info.reward_terms.get("center").unwrap());
                 let s = env.state().unwrap();
                 offsets.push(s.tcp.rotation.inverse() * s.tcp_to_object(0));
             }

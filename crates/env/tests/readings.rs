@@ -87,7 +87,7 @@ fn the_privileged_state_is_the_true_state_s_observation_and_the_policy_never_rea
         let mut steps = Vec::new();
         for seed in [3, 4] {
             let (obs, info) = env.reset(Some(seed)).unwrap();
-            let scale = info.extras.value("param/speed_scale");
+            let scale = info.extras.get("param/speed_scale").unwrap();
             let zeros = vec![0.0; env.action_space().dim()];
             let mut want = env.observation_of(env.state().unwrap(), &zeros, scale);
             want.push(scale);

@@ -129,7 +129,10 @@ fn a_policy_that_observes_the_speed_scale_sees_each_episodes() {
     let mut seen = Vec::new();
     for seed in 0..8 {
         let (obs, info) = env.reset(Some(seed)).unwrap();
-        let scale = info.extras.value("param/speed_scale");
+        let scale = info
+            .extras
+            .get("param/speed_scale")
+            .expect("the scale is reported");
         assert_eq!(obs.last(), Some(&scale), "seed {seed} at reset");
         let mut action = vec![0.0; 7];
         action[6] = 1.0;

@@ -33,7 +33,7 @@ fn a_scripted_pick_and_place_through_step_reaches_the_goal() {
                 if step.terminated || step.truncated {
                     if step.info.success {
                         successes += 1;
-                        assert!(step.info.extras.value("object_goal_distance") < 0.025);
+                        assert!(step.info.extras.get("object_goal_distance").unwrap() < 0.025);
                         // ≤ 0 per step until the success bonus.
                         let before = &rewards[..rewards.len() - 1];
                         assert!(before.iter().all(|r| *r <= 0.0), "{before:?}");
@@ -86,11 +86,11 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
             let mut policy = ScriptedGraspPolicy::for_object(&env, i, Some(drop.coords), true);
             while !policy.done() {
                 let step = env.step(&policy.act(&env)).unwrap();
-                let sorted = step.info.extras.value("objects_sorted");
+                let sorted = step.info.extras.get("objects_sorted").unwrap();
                 // The count never runs ahead of the objects dropped so far.
                 assert!(sorted <= (i + 1) as f32, "{sorted} after object {i}");
                 sorted_seen = f32::max(sorted_seen, sorted);
-                bonuses += step.info.reward_terms.value("object_sorted");
+                bonuses += step.info.reward_terms.get("object_sorted").unwrap();
                 if step.terminated || step.truncated {
                     successes += step.info.success as u32;
                     break 'episode;
@@ -116,7 +116,7 @@ fn an_object_dropped_into_the_wrong_bin_is_not_sorted() {
     let mut policy = ScriptedGraspPolicy::for_object(&env, 0, Some(drop), true);
     while !policy.done() {
         let step = env.step(&policy.act(&env)).unwrap();
-        assert_eq!(step.info.extras.value("objects_sorted"), 0.0);
+        assert_eq!(step.info.extras.get("objects_sorted").unwrap(), 0.0);
         assert!(!step.terminated);
     }
     assert!(

@@ -76,7 +76,7 @@ fn summarize(outcomes: &[EpisodeOutcome], episodes: u32) -> EvalResult {
         total_return += o.episode_return;
         total_length += o.length as u64;
         for (name, value) in o.final_extras.iter() {
-            let sum = extras_sum.value(name) + value;
+            let sum = extras_sum.get(name).unwrap_or(0.0) + value;
             extras_sum.set(name.to_string(), sum);
         }
     }

@@ -584,7 +584,7 @@ fn run<A: Algorithm>(
             let mut sums = NamedValues::new();
             for e in &recent {
                 for (name, value) in e.max_extras.iter() {
-                    let sum = sums.value(name) + value;
+                    let sum = sums.get(name).unwrap_or(0.0) + value;
                     sums.set(name.to_string(), sum);
                 }
             }

@@ -50,7 +50,7 @@ impl<T: Task> ArmWorld for ArmEnv<T> {
     }
 
     fn evaluate(&mut self, state: &ArmState) -> Evaluation {
-        self.task.evaluate(&self.scene, state)
+        self.task.evaluate(&self.scene, state).named()
     }
 }
 

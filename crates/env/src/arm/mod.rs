@@ -48,15 +48,55 @@ use rand_chacha::ChaCha8Rng;
 use std::collections::VecDeque;
 use std::ops::Range;
 
-/// What a task's evaluation of one step found (ManiSkill's `evaluate()`).
+/// What a task's evaluation of one step found (ManiSkill's `evaluate()`): its flags typed while
+/// the task reads them, named only in [`Info::extras`].
+///
+/// A task's reward reads its flags as fields, so a flag it never declared does not compile
+/// (reading them back by name, a typo read 0 and silently zeroed a reward term). This reads
+/// one the grasp declares:
+///
+/// ```
+/// use fairgrasp_env::arm::Evaluation;
+/// use fairgrasp_env::tasks::GraspFlags;
+/// fn grasped(e: &Evaluation<GraspFlags>) -> bool {
+///     e.flags.grasped
+/// }
+/// ```
+///
+/// and this one it does not:
+///
+/// ```compile_fail
+/// use fairgrasp_env::arm::Evaluation;
+/// use fairgrasp_env::tasks::GraspFlags;
+/// fn placed(e: &Evaluation<GraspFlags>) -> bool {
+///     e.flags.placed // the grasp declares no `placed`
+/// }
+/// ```
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Evaluation {
+pub struct Evaluation<F = NamedValues> {
     /// The success rule holds: the episode terminates.
     pub success: bool,
     /// The task failed for good (e.g. an object fell off the table): the episode terminates.
     pub failure: Option<EpisodeEvent>,
-    /// The task's flags and measures, reported in [`Info::extras`].
-    pub extras: NamedValues,
+    /// The task's flags and measures.
+    pub flags: F,
+}
+
+/// A task's flags and measures for one step: a struct of named fields, reported by name.
+pub trait TaskFlags: Clone + std::fmt::Debug + Send + 'static {
+    /// The flags by name, in a fixed order, as [`Info::extras`] reports them.
+    fn named(&self) -> NamedValues;
+}
+
+impl<F: TaskFlags> Evaluation<F> {
+    /// The evaluation with its flags named, as the env's callers read it.
+    pub fn named(&self) -> Evaluation {
+        Evaluation {
+            success: self.success,
+            failure: self.failure,
+            flags: self.flags.named(),
+        }
+    }
 }
 
 /// A task on the shared arm environment. One small type per task (see [`crate::tasks`]).
@@ -65,6 +105,8 @@ pub trait Task: Send + Sized + 'static {
     type Settings: TaskSettings;
     /// The `[reward]` section.
     type Reward: RewardSettings;
+    /// The step's flags and measures ([`Evaluation::flags`]).
+    type Flags: TaskFlags;
     /// The registered id (`FaArmGrasp-v0`).
     const ID: &'static str;
 
@@ -87,7 +129,7 @@ pub trait Task: Send + Sized + 'static {
     fn observe(&self, state: &ArmState, previous_action: &[f32], out: &mut ObsWriter);
 
     /// Evaluates the step just taken.
-    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation;
+    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation<Self::Flags>;
 
     /// The success rule `evaluate` applies, as a judge of states alone for a new episode (the
     /// deployment loop judges its estimated states by it); `None` when success needs the
@@ -98,8 +140,12 @@ pub trait Task: Send + Sized + 'static {
 
     /// The reward of the step just taken, by term. `steps_left` counts the control steps left
     /// before the time limit.
-    fn reward(&mut self, evaluation: &Evaluation, state: &ArmState, steps_left: u32)
-    -> NamedValues;
+    fn reward(
+        &mut self,
+        evaluation: &Evaluation<Self::Flags>,
+        state: &ArmState,
+        steps_left: u32,
+    ) -> NamedValues;
 
     /// A line describing the task's state, for the `ansi` render mode.
     fn describe(&self, _state: &ArmState) -> String {
@@ -828,8 +874,9 @@ impl<T: Task> Env for ArmEnv<T> {
         }
         let privileged = self.privileged(&state, &normalised, speed_scale);
         let mut evaluation = self.task.evaluate(&self.scene, &state);
+        let mut extras = evaluation.flags.named();
         if watch_force {
-            evaluation.extras.set("contact_force", peak_force);
+            extras.set("contact_force", peak_force);
         }
         if force_limit.is_some_and(|limit| peak_force > limit) {
             // The controller stops the arm: no success, whatever the task saw.
@@ -863,7 +910,7 @@ impl<T: Task> Env for ArmEnv<T> {
                 success: evaluation.success,
                 elapsed_steps: episode.steps,
                 events,
-                extras: evaluation.extras,
+                extras,
                 reward_terms,
                 privileged,
             },

@@ -12,7 +12,7 @@
 
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings,
-    SuccessJudge, Task, TaskSettings,
+    SuccessJudge, Task, TaskFlags, TaskSettings,
 };
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
@@ -337,9 +337,33 @@ pub(crate) fn rich_observation(
     out.push(None, previous_action);
 }
 
+/// The grasp's flags for one step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GraspFlags {
+    /// The fingers are closed on the object.
+    pub grasped: bool,
+    /// The object's lift above its rest (m).
+    pub lift: f64,
+    /// From the TCP to the object's centre (m).
+    pub ee_object_distance: f64,
+    /// Steps in a row the success rule has held.
+    pub success_streak: u32,
+}
+
+impl TaskFlags for GraspFlags {
+    fn named(&self) -> NamedValues {
+        NamedValues::new()
+            .with("grasped", self.grasped as u8 as f32)
+            .with("lift", self.lift as f32)
+            .with("ee_object_distance", self.ee_object_distance as f32)
+            .with("success_streak", self.success_streak as f32)
+    }
+}
+
 impl Task for Grasp {
     type Settings = GraspSettings;
     type Reward = GraspReward;
+    type Flags = GraspFlags;
     const ID: &'static str = ENV_ID;
 
     fn new(config: &GraspConfig, scene: &Scene) -> Result<Self> {
@@ -414,7 +438,7 @@ impl Task for Grasp {
         }
     }
 
-    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation {
+    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation<GraspFlags> {
         let status = grasp_status(state);
         let success = self.success.update_status(&status);
         Evaluation {
@@ -422,11 +446,12 @@ impl Task for Grasp {
             failure: scene
                 .object_off_table(0)
                 .then_some(EpisodeEvent::ObjectOffTable),
-            extras: NamedValues::new()
-                .with("grasped", status.closed_on_object as u8 as f32)
-                .with("lift", status.lift as f32)
-                .with("ee_object_distance", status.offset as f32)
-                .with("success_streak", self.success.streak() as f32),
+            flags: GraspFlags {
+                grasped: status.closed_on_object,
+                lift: status.lift,
+                ee_object_distance: status.offset,
+                success_streak: self.success.streak(),
+            },
         }
     }
 
@@ -434,7 +459,12 @@ impl Task for Grasp {
         Some(Box::new(GraspSuccess::new(&self.settings)))
     }
 
-    fn reward(&mut self, e: &Evaluation, state: &ArmState, steps_left: u32) -> NamedValues {
+    fn reward(
+        &mut self,
+        e: &Evaluation<GraspFlags>,
+        state: &ArmState,
+        steps_left: u32,
+    ) -> NamedValues {
         let r = &self.reward;
         let distance = state.tcp_to_object(0).norm() as f32;
         let grasped = state.grasped(0);

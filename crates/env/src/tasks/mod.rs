@@ -6,3 +6,7 @@ pub mod grasp;
 pub mod pick_place;
 pub mod shapes;
 pub mod sort;
+
+pub use grasp::GraspFlags;
+pub use pick_place::PlaceFlags;
+pub use sort::SortFlags;

@@ -5,7 +5,7 @@
 
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
-    TaskSettings,
+    TaskFlags, TaskSettings,
 };
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
@@ -148,9 +148,36 @@ impl PickPlace {
     }
 }
 
+/// Pick-and-place's flags for one step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlaceFlags {
+    /// The fingers are closed on the object.
+    pub grasped: bool,
+    /// The object's lift above its rest (m).
+    pub lift: f64,
+    /// From the object's centre to the goal (m).
+    pub object_goal_distance: f64,
+    /// The object is within the goal's tolerance.
+    pub placed: bool,
+    /// Steps in a row the object has rested placed.
+    pub success_streak: u32,
+}
+
+impl TaskFlags for PlaceFlags {
+    fn named(&self) -> NamedValues {
+        NamedValues::new()
+            .with("grasped", self.grasped as u8 as f32)
+            .with("lift", self.lift as f32)
+            .with("object_goal_distance", self.object_goal_distance as f32)
+            .with("placed", self.placed as u8 as f32)
+            .with("success_streak", self.success_streak as f32)
+    }
+}
+
 impl Task for PickPlace {
     type Settings = PickPlaceSettings;
     type Reward = PickPlaceReward;
+    type Flags = PlaceFlags;
     const ID: &'static str = ENV_ID;
 
     fn new(config: &PickPlaceConfig, scene: &Scene) -> Result<Self> {
@@ -186,7 +213,7 @@ impl Task for PickPlace {
         out.push3(NoiseGroup::ObjectPosition, &self.object_to_goal(s));
     }
 
-    fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation {
+    fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation<PlaceFlags> {
         let to_goal = self.object_to_goal(s).norm();
         let speed = s.objects[0].linvel.norm();
         let placed = to_goal < self.settings.goal_tolerance as f64;
@@ -197,16 +224,17 @@ impl Task for PickPlace {
             failure: scene
                 .object_off_table(0)
                 .then_some(EpisodeEvent::ObjectOffTable),
-            extras: NamedValues::new()
-                .with("grasped", s.grasped(0) as u8 as f32)
-                .with("lift", s.lift(0) as f32)
-                .with("object_goal_distance", to_goal as f32)
-                .with("placed", placed as u8 as f32)
-                .with("success_streak", streak as f32),
+            flags: PlaceFlags {
+                grasped: s.grasped(0),
+                lift: s.lift(0),
+                object_goal_distance: to_goal,
+                placed,
+                success_streak: streak,
+            },
         }
     }
 
-    fn reward(&mut self, e: &Evaluation, s: &ArmState, steps_left: u32) -> NamedValues {
+    fn reward(&mut self, e: &Evaluation<PlaceFlags>, s: &ArmState, steps_left: u32) -> NamedValues {
         let mut terms = NamedValues::new();
         let success = if e.success { self.reward.success } else { 0.0 };
         match self.reward.kind {
@@ -216,7 +244,7 @@ impl Task for PickPlace {
                 let grasped = s.grasped(0);
                 let reach = 1.0 - (4.0 * s.tcp_to_object(0).norm() as f32).tanh();
                 let to_goal = self.object_to_goal(s).norm() as f32;
-                let placed = e.extras.value("placed") > 0.0;
+                let placed = e.flags.placed;
                 // Grasped counts as done once the object is at its goal, so releasing it
                 // there (goals on the table) is not punished.
                 let hold = grasped || placed;

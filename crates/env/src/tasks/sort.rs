@@ -8,7 +8,7 @@
 
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
-    TaskSettings,
+    TaskFlags, TaskSettings,
 };
 use crate::config::{check_at_least_one, check_non_negative};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
@@ -210,9 +210,33 @@ impl Sort {
     }
 }
 
+/// Sorting's flags for one step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SortFlags {
+    /// Objects resting in their own bins.
+    pub objects_sorted: usize,
+    /// Objects in the scene.
+    pub objects: usize,
+    /// The fingers are closed on the active object.
+    pub grasped: bool,
+}
+
+impl TaskFlags for SortFlags {
+    fn named(&self) -> NamedValues {
+        NamedValues::new()
+            .with("objects_sorted", self.objects_sorted as f32)
+            .with(
+                "fraction_sorted",
+                self.objects_sorted as f32 / self.objects as f32,
+            )
+            .with("grasped", self.grasped as u8 as f32)
+    }
+}
+
 impl Task for Sort {
     type Settings = SortSettings;
     type Reward = SortReward;
+    type Flags = SortFlags;
     const ID: &'static str = ENV_ID;
 
     fn configure_scene(config: &SortConfig, scene: &mut SceneConfig) -> Result<()> {
@@ -292,7 +316,7 @@ impl Task for Sort {
         }
     }
 
-    fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation {
+    fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation<SortFlags> {
         for i in 0..self.sorted.len() {
             let resting = s.objects[i].linvel.norm() < self.settings.max_object_speed as f64;
             self.sorted[i] = scene.object_in_bin(i, self.assignment[i]) && resting && !s.grasped(i);
@@ -304,14 +328,15 @@ impl Task for Sort {
         Evaluation {
             success: count == self.sorted.len(),
             failure: off.then_some(EpisodeEvent::ObjectOffTable),
-            extras: NamedValues::new()
-                .with("objects_sorted", count as f32)
-                .with("fraction_sorted", count as f32 / self.sorted.len() as f32)
-                .with("grasped", grasped as u8 as f32),
+            flags: SortFlags {
+                objects_sorted: count,
+                objects: self.sorted.len(),
+                grasped,
+            },
         }
     }
 
-    fn reward(&mut self, e: &Evaluation, s: &ArmState, steps_left: u32) -> NamedValues {
+    fn reward(&mut self, e: &Evaluation<SortFlags>, s: &ArmState, steps_left: u32) -> NamedValues {
         let n = self.sorted.len() as f32;
         let mut newly = 0;
         for (paid, sorted) in self.paid.iter_mut().zip(&self.sorted) {
@@ -340,7 +365,7 @@ impl Task for Sort {
                 }
             }
         };
-        let count = e.extras.value("objects_sorted");
+        let count = e.flags.objects_sorted as f32;
         let mut terms = NamedValues::new();
         // In [-n, 0] per step: each object sorted is worth a whole stage, so carrying the
         // active object pays as much as the pick-and-place task's carry does.
