@@ -4,8 +4,8 @@
 //! (`bench/harness/reference_bench.py sac-gradient-steps`).
 
 use anyhow::{Result, ensure};
+use fairgrasp_env::random::standard_normal;
 use fairgrasp_env::{Env, registry};
-use fairgrasp_rl::nn::standard_normal;
 use fairgrasp_rl::sac::Sac;
 use fairgrasp_rl::train::TrainConfig;
 use rand::{Rng, SeedableRng};

@@ -4,11 +4,12 @@
 use candle_core::{Device, Tensor};
 use fairgrasp_deploy::export::onnx::{OUTPUT_ACTION, OUTPUT_ENV_ACTION};
 use fairgrasp_deploy::export::{Format, export, export_policy};
+use fairgrasp_env::random::standard_normal;
 use fairgrasp_env::wrappers::{RescaleAction, VecNormalizeConfig, VecNormalizeState};
 use fairgrasp_env::{Env, RunningMeanStd, registry};
 use fairgrasp_rl::algorithm::{Algorithm, TensorMap};
 use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, env_table, save_model};
-use fairgrasp_rl::nn::{Activation, standard_normal};
+use fairgrasp_rl::nn::Activation;
 use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use fairgrasp_rl::sac::{Sac, SacConfig};

@@ -21,6 +21,7 @@ pub mod check;
 pub mod config;
 pub mod core;
 pub mod error;
+pub mod random;
 pub mod registry;
 pub mod running_stats;
 pub mod scripted;

@@ -63,11 +63,8 @@ impl BoxSpace {
                 if lo.is_finite() && hi.is_finite() {
                     lo + (hi - lo) * rng.random::<f32>()
                 } else {
-                    // Box-Muller; clamp into whichever side is bounded.
-                    let u1: f32 = rng.random::<f32>().max(1e-12);
-                    let u2: f32 = rng.random();
-                    let n = (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos();
-                    n.clamp(lo, hi)
+                    // Clamped into whichever side is bounded.
+                    crate::random::standard_normal(rng).clamp(lo, hi)
                 }
             })
             .collect()

@@ -11,8 +11,8 @@
 //! `PPO_TIMING_AUTOGRAD=1` runs the update through candle's autograd instead of the loss
 //! written out (`fairgrasp_rl::kernels::ppo_loss`).
 
+use fairgrasp_env::random::standard_normal;
 use fairgrasp_rl::algorithm::Algorithm;
-use fairgrasp_rl::nn::standard_normal;
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

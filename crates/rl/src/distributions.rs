@@ -5,8 +5,8 @@
 //! caller keeps the random stream (and with it a seeded run's reproducibility): see
 //! [`standard_normal_tensor`].
 
-use crate::nn::standard_normal;
 use candle_core::{D, Device, Result, Tensor};
+use fairgrasp_env::random::standard_normal;
 use rand::Rng;
 
 /// ½ ln 2π.

@@ -29,13 +29,6 @@ pub struct Mlp {
     weight_init: Vec<(String, f64)>,
 }
 
-/// A draw from N(0, 1) (Box–Muller).
-pub fn standard_normal(rng: &mut impl Rng) -> f32 {
-    let u1: f32 = rng.random::<f32>().max(1e-12);
-    let u2: f32 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
-}
-
 /// A linear layer with zero weights and bias; [`Mlp::init_weights`] draws the weights.
 fn linear(
     vb: &VarBuilder,
@@ -103,7 +96,7 @@ impl Mlp {
                 .ok_or_else(|| candle_core::Error::Msg(format!("no variable `{name}`")))?;
             let (fan_out, fan_in) = var.as_tensor().dims2()?;
             let values: Vec<f32> = (0..fan_out * fan_in)
-                .map(|_| *std as f32 * standard_normal(rng))
+                .map(|_| *std as f32 * fairgrasp_env::random::standard_normal(rng))
                 .collect();
             var.set(&Tensor::from_vec(values, (fan_out, fan_in), var.device())?)?;
         }

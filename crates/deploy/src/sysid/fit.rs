@@ -258,10 +258,12 @@ mod tests {
         let mut s = Samples::default();
         let mut t = truth.t0;
         while t < truth.end() {
-            let jitter = crate::twin::faults::gaussian(&mut rng) * 0.0003;
+            let jitter = fairgrasp_env::random::standard_normal_f64(&mut rng) * 0.0003;
             s.t.push(t + jitter);
             s.q.push(
-                truth.at(t + jitter) + noise_deg * crate::twin::faults::gaussian(&mut rng) + 0.2,
+                truth.at(t + jitter)
+                    + noise_deg * fairgrasp_env::random::standard_normal_f64(&mut rng)
+                    + 0.2,
             );
             t += 0.008;
         }

@@ -37,6 +37,7 @@
 //! The `Twin…` methods themselves are never delayed, so a test can always reach the twin.
 
 use crate::fairino::cnde::FrameFate;
+use fairgrasp_env::random::standard_normal_f64;
 use std::fmt;
 use std::time::Duration;
 
@@ -101,7 +102,7 @@ impl FaultSettings {
     pub fn draw_latency_ms(&self, rng: &mut impl rand::Rng) -> f64 {
         let mut ms = self.latency_ms;
         if self.latency_jitter_ms > 0.0 {
-            ms += (self.latency_jitter_ms * gaussian(rng)).abs();
+            ms += (self.latency_jitter_ms * standard_normal_f64(rng)).abs();
         }
         if let Some(o) = self.latency_outliers
             && rng.random::<f64>() < o.probability
@@ -473,13 +474,6 @@ impl fmt::Display for FaultCommand {
     }
 }
 
-/// A standard normal draw (Box–Muller; two lines do not justify another dependency).
-pub fn gaussian(rng: &mut impl rand::Rng) -> f64 {
-    let u1: f64 = rng.random::<f64>().max(1e-300);
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -672,19 +666,5 @@ mod tests {
         assert_eq!(s.take_slow_delay("MoveJ"), 50.0);
         assert_eq!(s.take_slow_delay("MoveJ"), 0.0);
         assert!(s.slow.is_none());
-    }
-
-    #[test]
-    fn gaussian_has_unit_spread() {
-        use rand::SeedableRng;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        let n = 20_000;
-        let draws: Vec<f64> = (0..n).map(|_| gaussian(&mut rng)).collect();
-        let mean = draws.iter().sum::<f64>() / n as f64;
-        let var = draws.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / n as f64;
-        assert!(
-            mean.abs() < 0.03 && (var - 1.0).abs() < 0.05,
-            "{mean} {var}"
-        );
     }
 }

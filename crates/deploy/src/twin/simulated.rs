@@ -11,13 +11,14 @@
 //! with encoder noise, and the pose feed one every feed period.
 
 use super::controller::{Controller, ControllerConfig, StartState, codes};
-use super::faults::{TrackingModel, gaussian};
+use super::faults::TrackingModel;
 use super::world::World;
 use crate::error::{DeployError, Result};
 use crate::fairino::error_codes::error_code_meaning;
 use crate::pose_source::{PoseMessage, PoseSource, ReceivedPose};
 use crate::robot::{RobotCommand, RobotLink, RobotState, StampedState};
 use crate::runner::EpisodeHost;
+use fairgrasp_env::random::standard_normal_f64 as gaussian;
 use fairgrasp_sim::rapier3d::na::Isometry3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

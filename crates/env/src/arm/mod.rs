@@ -263,12 +263,6 @@ fn write_observation<T: Task>(
     }
 }
 
-fn gaussian(rng: &mut impl Rng) -> f32 {
-    let u1: f32 = rng.random::<f32>().max(1e-12);
-    let u2: f32 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f32::consts::PI * u2).cos()
-}
-
 pub(crate) fn uniform(rng: &mut impl Rng, range: [f32; 2]) -> f32 {
     range[0] + (range[1] - range[0]) * rng.random::<f32>()
 }
@@ -512,7 +506,7 @@ impl<T: Task> ArmEnv<T> {
             let std = group.std(noise);
             if std > 0.0 {
                 for v in &mut obs[range.clone()] {
-                    *v += std * gaussian(&mut self.rng);
+                    *v += std * crate::random::standard_normal(&mut self.rng);
                 }
             }
         }

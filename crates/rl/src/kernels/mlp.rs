@@ -299,10 +299,10 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         net.init_weights(&varmap, &mut rng).unwrap();
         let x: Vec<f32> = (0..batch * inp)
-            .map(|_| crate::nn::standard_normal(&mut rng))
+            .map(|_| fairgrasp_env::random::standard_normal(&mut rng))
             .collect();
         let upstream: Vec<f32> = (0..batch * out)
-            .map(|_| crate::nn::standard_normal(&mut rng))
+            .map(|_| fairgrasp_env::random::standard_normal(&mut rng))
             .collect();
         let xt = Tensor::from_slice(&x, (batch, inp), &dev).unwrap();
         let y = net.forward(&xt).unwrap();

@@ -421,8 +421,8 @@ impl PolicyPart {
 #[cfg(test)]
 mod tests {
     use crate::algorithm::Algorithm;
-    use crate::nn::standard_normal;
     use crate::ppo::{Ppo, PpoConfig};
+    use fairgrasp_env::random::standard_normal;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

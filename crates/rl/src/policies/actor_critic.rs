@@ -10,11 +10,12 @@
 use crate::distributions::{DiagGaussian, log_prob_term, standard_normal_tensor};
 use crate::error::{Result, RlError};
 use crate::kernels::mlp;
-use crate::nn::{Activation, Mlp, standard_normal};
+use crate::nn::{Activation, Mlp};
 use crate::policies::features::{FeaturesConfig, FeaturesExtractor};
 use crate::ppo::PpoConfig;
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
+use fairgrasp_env::random::standard_normal;
 use rand::Rng;
 
 /// Output-layer gains (see [`Mlp::new`]): small for the policy means, so the first actions are

@@ -77,7 +77,7 @@ impl Td3Actor {
         let mut actions: Vec<f32> = self.forward(&obs)?.flatten_all()?.to_vec1()?;
         if !deterministic {
             for a in &mut actions {
-                let noise = self.action_noise * crate::nn::standard_normal(rng);
+                let noise = self.action_noise * fairgrasp_env::random::standard_normal(rng);
                 *a = (*a + noise).clamp(-1.0, 1.0);
             }
         }
