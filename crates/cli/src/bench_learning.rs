@@ -311,7 +311,7 @@ fn write_section(path: &Path, section: &str) -> Result<()> {
         (Some(b), Some(e)) if e > b => format!("{}{block}{}", &old[..b], &old[e + END.len()..]),
         _ => format!("{}\n\n{block}", old.trim_end()),
     };
-    fairgrasp_rl::save_util::write_atomic(path, text.as_bytes())
+    fairgrasp_env::atomic::write(path, text.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))
 }
 

@@ -51,7 +51,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         smooth: args.smooth as usize,
     };
     let bytes = figure.render(format)?;
-    fairgrasp_rl::save_util::write_atomic(&args.out, &bytes)
+    fairgrasp_env::atomic::write(&args.out, &bytes)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     let (w, h) = figure.size();
     println!(

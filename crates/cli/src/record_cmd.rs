@@ -117,7 +117,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
         encode_mp4(&frames, w, h, fps, &args.out)?;
     } else {
         let bytes = fairgrasp_env::render::video::encode_gif(&frames, w, h, fps)?;
-        fairgrasp_rl::save_util::write_atomic(&args.out, &bytes)
+        fairgrasp_env::atomic::write(&args.out, &bytes)
             .with_context(|| format!("cannot write {}", args.out.display()))?;
     }
     println!(

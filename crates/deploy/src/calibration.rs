@@ -139,7 +139,9 @@ impl Calibration {
              robot degrees.\n{}",
             toml::to_string(self).map_err(|e| DeployError::Other(e.to_string()))?
         );
-        crate::atomic::write(path, text.as_bytes())
+        fairgrasp_env::atomic::write(path, text.as_bytes()).map_err(|e| {
+            DeployError::config(path.display().to_string(), format!("cannot write: {e}"))
+        })
     }
 
     /// Robot joint angles (deg) for simulator joint angles (rad).

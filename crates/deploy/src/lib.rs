@@ -12,7 +12,6 @@
 //! - [`export`]: ONNX and safetensors files of a trained policy.
 //! - [`robustness`]: a policy's success over a grid of held-out conditions.
 
-pub mod atomic;
 pub mod calibration;
 pub mod commissioning;
 pub mod error;

@@ -17,6 +17,7 @@
 //! - [`running_stats`]: [`RunningMeanStd`], SB3's running mean and variance.
 
 pub mod arm;
+pub mod atomic;
 pub mod check;
 pub mod config;
 pub mod core;

@@ -4,7 +4,7 @@
 //! [`buffers`] (rollout buffer with GAE, replay buffer), [`distributions`] (the Gaussian and the
 //! tanh-squashed Gaussian), [`policies`] (networks built through a feature extractor, and
 //! [`policies::Policy`] for acting with a saved model), [`logger`] (TensorBoard event files and
-//! CSV), [`save_util`] (atomic writes) — and each algorithm is a thin module on top.
+//! CSV) — and each algorithm is a thin module on top.
 //!
 //! Networks run on [candle](https://github.com/huggingface/candle) (CPU); a PPO update on our
 //! network sizes measured 4.8 s with candle against 6.7 s with burn-ndarray, and candle builds in
@@ -24,7 +24,6 @@ pub mod off_policy;
 pub mod policies;
 pub mod ppo;
 pub mod sac;
-pub mod save_util;
 pub mod td3;
 pub mod train;
 

@@ -10,9 +10,9 @@ use crate::algorithm::TensorMap;
 use crate::error::{Result, RlError};
 use crate::ppo::PpoConfig;
 use crate::sac::SacConfig;
-use crate::save_util::write_atomic;
 use crate::td3::Td3Config;
 use candle_core::Device;
+use fairgrasp_env::atomic;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -231,7 +231,7 @@ pub fn write_model_files(dir: &Path, weights: &TensorMap, meta: &ModelMeta) -> R
     std::fs::create_dir_all(dir).map_err(|e| RlError::Other(format!("{}: {e}", dir.display())))?;
     save_tensors(&dir.join("model.safetensors"), weights)?;
     let json = serde_json::to_string_pretty(meta).map_err(|e| RlError::Other(e.to_string()))?;
-    write_atomic(&dir.join("model.json"), json.as_bytes())
+    atomic::write(&dir.join("model.json"), json.as_bytes())
         .map_err(|e| RlError::Other(format!("{}: {e}", dir.display())))
 }
 

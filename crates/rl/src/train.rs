@@ -17,8 +17,8 @@ use crate::model::{
 use crate::policies::Policy;
 use crate::ppo::{Ppo, PpoConfig};
 use crate::sac::{Sac, SacConfig};
-use crate::save_util::write_atomic;
 use crate::td3::{Td3, Td3Config};
+use fairgrasp_env::atomic;
 use fairgrasp_env::wrappers::{
     EpisodeStats, RescaleAction, VecNormalize, VecNormalizeConfig, VecNormalizeState,
 };
@@ -357,7 +357,7 @@ pub fn train_until(
     let io = |e: std::io::Error| RlError::Other(format!("{}: {e}", run_dir.display()));
     std::fs::create_dir_all(run_dir).map_err(io)?;
     let effective = toml::to_string(config).map_err(|e| RlError::Other(e.to_string()))?;
-    write_atomic(&run_dir.join("config.toml"), effective.as_bytes()).map_err(io)?;
+    atomic::write(&run_dir.join("config.toml"), effective.as_bytes()).map_err(io)?;
     dispatch(config, run_dir, None, on_progress)
 }
 
@@ -404,7 +404,7 @@ pub fn resume_until(
         })?;
     if !overrides.is_empty() {
         let effective = toml::to_string(&config).map_err(|e| RlError::Other(e.to_string()))?;
-        write_atomic(&config_path, effective.as_bytes())
+        atomic::write(&config_path, effective.as_bytes())
             .map_err(|e| RlError::Other(format!("{}: {e}", config_path.display())))?;
     }
     dispatch(&config, run_dir, Some(checkpoint), on_progress)
@@ -645,7 +645,7 @@ fn run<A: Algorithm>(
                 )?;
                 let path = run_dir.join("videos").join(format!("eval_{steps}.gif"));
                 std::fs::create_dir_all(run_dir.join("videos")).map_err(io)?;
-                write_atomic(&path, &gif).map_err(io)?;
+                atomic::write(&path, &gif).map_err(io)?;
             }
             tb.add_scalars(steps, &scalars).map_err(io)?;
             let mut row: Vec<(&str, f64)> = scalars
@@ -755,7 +755,7 @@ fn run<A: Algorithm>(
         stopped,
     };
     let json = serde_json::to_string_pretty(&summary).map_err(|e| RlError::Other(e.to_string()))?;
-    write_atomic(&run_dir.join("summary.json"), json.as_bytes()).map_err(io)?;
+    atomic::write(&run_dir.join("summary.json"), json.as_bytes()).map_err(io)?;
     Ok(summary)
 }
 
@@ -778,7 +778,7 @@ fn write_checkpoint<A: Algorithm>(
     let training: TensorMap = algo.training_state()?;
     save_tensors(&staging.join(TRAINING_STATE), &training)?;
     let json = serde_json::to_string(state).map_err(|e| RlError::Other(e.to_string()))?;
-    write_atomic(&staging.join(TRAINER_STATE), json.as_bytes())
+    atomic::write(&staging.join(TRAINER_STATE), json.as_bytes())
         .map_err(|e| RlError::Other(format!("{}: {e}", staging.display())))?;
     replace_dir(&staging, &dir)
 }

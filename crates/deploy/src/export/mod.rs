@@ -76,6 +76,6 @@ pub fn export_policy(policy: &Policy, format: Format, out: &Path) -> Result<()> 
         Format::Safetensors => safetensors::safetensors_bytes(&spec),
     }
     .map_err(|e| DeployError::config(spec::model_name(policy), e))?;
-    fairgrasp_rl::save_util::write_atomic(out, &bytes)
+    fairgrasp_env::atomic::write(out, &bytes)
         .map_err(|e| DeployError::config(out.display().to_string(), format!("cannot write: {e}")))
 }

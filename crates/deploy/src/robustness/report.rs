@@ -179,7 +179,7 @@ impl RobustnessReport {
     pub fn save(&self, path: &Path) -> Result<()> {
         let json = serde_json::to_string_pretty(self)
             .map_err(|e| DeployError::Other(format!("robustness report: {e}")))?;
-        fairgrasp_rl::save_util::write_atomic(path, json.as_bytes())
+        fairgrasp_env::atomic::write(path, json.as_bytes())
             .map_err(|e| DeployError::config(path.display().to_string(), e.to_string()))
     }
 

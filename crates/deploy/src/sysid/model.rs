@@ -146,7 +146,14 @@ impl DriveModel {
     /// Writes a new file atomically; an existing file is never replaced (an error says so).
     pub fn save_new(&self, path: &Path) -> Result<()> {
         self.validate()?;
-        crate::atomic::write_new(path, self.to_toml()?.as_bytes())
+        fairgrasp_env::atomic::write_new(path, self.to_toml()?.as_bytes()).map_err(|e| {
+            let message = if e.kind() == std::io::ErrorKind::AlreadyExists {
+                "exists already; it is kept (give another path, or move it away)".to_string()
+            } else {
+                format!("cannot write: {e}")
+            };
+            DeployError::config(path.display().to_string(), message)
+        })
     }
 }
 

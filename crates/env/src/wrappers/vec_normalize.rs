@@ -6,9 +6,7 @@ use crate::running_stats::RunningMeanStd;
 use crate::spaces::BoxSpace;
 use crate::vector::{EpisodeEnd, VecStep, VectorEnv};
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The `format` tag of a statistics file.
 const FORMAT: &str = "fairgrasp.vec_normalize";
@@ -252,7 +250,10 @@ impl VecNormalizeState {
     /// then renamed over `path`, so that a reader never sees a half-written file and a crash
     /// leaves either the old file or the new one.
     pub fn save(&self, path: &Path) -> Result<()> {
-        write_atomic(path, self.to_json().as_bytes())
+        crate::atomic::write(path, self.to_json().as_bytes()).map_err(|e| EnvError::File {
+            path: path.display().to_string(),
+            problem: format!("cannot write: {e}"),
+        })
     }
 
     /// Reads a statistics file written by [`Self::save`]. Errors name the file and the problem.
@@ -265,48 +266,6 @@ impl VecNormalizeState {
             .map_err(|e| file_error(format!("cannot read VecNormalize statistics: {e}")))?;
         Self::from_json(&text).map_err(file_error)
     }
-}
-
-/// Writes `bytes` to `path` through a temporary file in the same directory and a rename.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let file_error = |problem: String| EnvError::File {
-        path: path.display().to_string(),
-        problem,
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| file_error("not a file path".into()))?
-        .to_string_lossy();
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let tmp = dir.join(format!(
-        ".{name}.{}.{}.tmp",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let written = (|| -> std::io::Result<()> {
-        let mut file = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        drop(file);
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = written {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(file_error(format!("cannot write: {e}")));
-    }
-    // Make the rename itself durable where the platform allows it (best effort).
-    #[cfg(unix)]
-    if let Ok(d) = std::fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
 }
 
 /// Normalises the observations and rewards of a vector environment by running statistics,

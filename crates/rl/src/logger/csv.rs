@@ -87,7 +87,7 @@ impl CsvLogger {
             text.push_str(&self.format_row(row));
             text.push('\n');
         }
-        crate::save_util::write_atomic(&self.path, text.as_bytes())
+        fairgrasp_env::atomic::write(&self.path, text.as_bytes())
     }
 
     pub fn path(&self) -> &Path {
