@@ -2,7 +2,25 @@
 //!
 //! Negative codes are produced by the vendor SDKs themselves (communication and file
 //! errors; -17…-20 are the Python SDK's CNDE configuration errors), positive ones by the
-//! controller. Facts from `fairino-controller.md` and the vendor's `robot_error.h`.
+//! controller. Facts from `fairino-controller.md`, the vendor's `robot_error.h` and its C# SDK's
+//! error enum (31, 101).
+
+/// The controller's return codes that fairgrasp names, as the twin gives them and the client
+/// reads them ([`error_code_meaning`] has every one the vendor documents).
+pub mod codes {
+    pub const OK: i32 = 0;
+    pub const PARAM_COUNT: i32 = 3;
+    pub const PARAM_VALUE: i32 = 4;
+    pub const EXECUTION_FAILED: i32 = 14;
+    pub const IK_FAILED: i32 = 28;
+    pub const SERVOJ_OVER_LIMIT: i32 = 29;
+    pub const NOT_RESETTABLE: i32 = 30;
+    pub const EMERGENCY_STOP: i32 = 31;
+    pub const GRIPPER_MOTION: i32 = 73;
+    pub const WAIT_TIMEOUT: i32 = 76;
+    pub const SAFETY_STOP: i32 = 99;
+    pub const NOT_ENABLED: i32 = 101;
+}
 
 /// What a FAIRINO error code means, in a few words; `"unknown error code"` for any code
 /// this table does not know.
@@ -38,6 +56,7 @@ pub fn error_code_meaning(code: i64) -> &'static str {
         28 => "inverse kinematics failed",
         29 => "ServoJ joint over limit",
         30 => "fault cannot be reset: power-cycle the control box",
+        31 => "emergency stop (once released: power-cycle the control box)",
         33 => "external axis not at zero: lead and resolution not set",
         34 => "wrong workpiece number",
         36 => "file name too long",
@@ -60,6 +79,7 @@ pub fn error_code_meaning(code: i64) -> &'static str {
         83 => "wrong TPD tool number",
         94 => "wrong spline point",
         99 => "safety stop",
+        101 => "robot not enabled",
         108 => "wrong spiral start point",
         112 => "target pose unreachable",
         130 => "point table not found",
@@ -83,5 +103,30 @@ mod tests {
         assert!(error_code_meaning(-4).contains("not connected"));
         assert_eq!(error_code_meaning(12345), "unknown error code");
         assert_eq!(error_code_meaning(-99), "unknown error code");
+    }
+
+    #[test]
+    fn every_named_code_has_its_meaning() {
+        use codes::*;
+        for code in [
+            PARAM_COUNT,
+            PARAM_VALUE,
+            EXECUTION_FAILED,
+            IK_FAILED,
+            SERVOJ_OVER_LIMIT,
+            NOT_RESETTABLE,
+            EMERGENCY_STOP,
+            GRIPPER_MOTION,
+            WAIT_TIMEOUT,
+            SAFETY_STOP,
+            NOT_ENABLED,
+        ] {
+            assert_ne!(
+                error_code_meaning(code as i64),
+                "unknown error code",
+                "{code}"
+            );
+        }
+        assert_eq!(error_code_meaning(OK as i64), "success");
     }
 }

@@ -70,27 +70,12 @@
 use super::faults::TrackingModel;
 use super::gripper::Gripper;
 use super::motion::{Brake, Drives, Joints, Profile, ServoStep, max_gap, rate_limited};
+use crate::fairino::error_codes::codes;
 use crate::fairino::fr5;
 use crate::robot::RobotState;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::{Isometry3, Translation3, UnitQuaternion};
 use std::collections::VecDeque;
-
-/// Return codes of the controller (numbers from the vendor's `robot_error.h`).
-pub mod codes {
-    pub const OK: i32 = 0;
-    pub const PARAM_COUNT: i32 = 3;
-    pub const PARAM_VALUE: i32 = 4;
-    pub const EXECUTION_FAILED: i32 = 14;
-    pub const IK_FAILED: i32 = 28;
-    pub const SERVOJ_OVER_LIMIT: i32 = 29;
-    pub const NOT_RESETTABLE: i32 = 30;
-    pub const EMERGENCY_STOP: i32 = 31;
-    pub const GRIPPER_MOTION: i32 = 73;
-    pub const WAIT_TIMEOUT: i32 = 76;
-    pub const SAFETY_STOP: i32 = 99;
-    pub const NOT_ENABLED: i32 = 101;
-}
 
 /// `(main_code, sub_code)` while the e-stop is pressed, and after until reset.
 pub const MAIN_CODE_EMERGENCY_STOP: (i32, i32) = (31, 1);

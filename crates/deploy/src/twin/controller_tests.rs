@@ -3,10 +3,11 @@
 
 use super::controller::{
     Controller, ControllerConfig, DEFAULT_BRAKE_DECEL_DEG_S2, MAIN_CODE_EMERGENCY_STOP,
-    MAIN_CODE_FOLLOWING_ERROR, MAIN_CODE_SERVOJ_OVER_LIMIT, Measured, StartState, codes,
+    MAIN_CODE_FOLLOWING_ERROR, MAIN_CODE_SERVOJ_OVER_LIMIT, Measured, StartState,
 };
 use super::faults::JointTracking;
 use super::motion::{Joints, max_gap};
+use crate::fairino::error_codes::codes;
 use crate::fairino::fr5::MAX_SPEED_DEG_S;
 use fairgrasp_sim::kinematics::SerialChain;
 

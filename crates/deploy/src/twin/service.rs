@@ -12,8 +12,9 @@
 
 use super::Shared;
 use super::call_log::CallRecord;
-use super::controller::{Controller, codes};
+use super::controller::Controller;
 use super::faults::FaultCommand;
+use crate::fairino::error_codes::codes;
 use crate::fairino::xmlrpc::{Fault, Handler, Value};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;

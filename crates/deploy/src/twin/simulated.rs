@@ -10,10 +10,11 @@
 //! the state stream keeps a snapshot every stream period (the CNDE frame a real client reads),
 //! with encoder noise, and the pose feed one every feed period.
 
-use super::controller::{Controller, ControllerConfig, StartState, codes};
+use super::controller::{Controller, ControllerConfig, StartState};
 use super::faults::TrackingModel;
 use super::world::World;
 use crate::error::{DeployError, Result};
+use crate::fairino::error_codes::codes;
 use crate::fairino::error_codes::error_code_meaning;
 use crate::pose_source::{PoseMessage, PoseSource, ReceivedPose};
 use crate::robot::{RobotCommand, RobotLink, RobotState, StampedState};

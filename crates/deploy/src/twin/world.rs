@@ -283,8 +283,9 @@ pub fn measure(scene: &Scene) -> Measured {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fairino::error_codes::codes;
     use crate::twin::controller::{
-        Controller, ControllerConfig, StartState, codes, pose_to_wire, wire_to_pose,
+        Controller, ControllerConfig, StartState, pose_to_wire, wire_to_pose,
     };
     use crate::twin::motion::max_gap;
 
