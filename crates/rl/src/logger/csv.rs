@@ -1,10 +1,39 @@
 //! A CSV log of the same scalars TensorBoard gets (SB3's `progress.csv`): one row per dump,
 //! one column per tag; a tag first seen later rewrites the header (the file is small).
-//! [`ProgressLog`] reads such a file back, strictly (for plotting and benchmarks).
+//! [`ProgressLog`] reads such a file back, strictly (for plotting and benchmarks). Both go
+//! through the `csv` crate, so a tag with a comma or a quote in it is quoted, as pandas and
+//! SB3's reader expect.
 
 use std::collections::BTreeMap;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
+
+/// One CSV record (no line end quirks: `\n` terminators, fields quoted only where needed).
+fn record<I: IntoIterator<Item = T>, T: AsRef<[u8]>>(fields: I) -> io::Result<Vec<u8>> {
+    let mut writer = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    writer.write_record(fields).map_err(io::Error::other)?;
+    writer
+        .into_inner()
+        .map_err(|e| io::Error::other(e.to_string()))
+}
+
+/// The records of a CSV text, each with its line number, lengths left to the caller.
+fn records(text: &str) -> impl Iterator<Item = (usize, Result<csv::StringRecord, csv::Error>)> {
+    csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(text.as_bytes())
+        .into_records()
+        .map(|r| {
+            let line = match &r {
+                Ok(record) => record.position().map_or(0, |p| p.line() as usize),
+                Err(e) => e.position().map_or(0, |p| p.line() as usize),
+            };
+            (line, r)
+        })
+}
 
 pub struct CsvLogger {
     path: PathBuf,
@@ -23,14 +52,12 @@ impl CsvLogger {
             rows: Vec::new(),
         };
         if let Ok(text) = std::fs::read_to_string(&logger.path) {
-            let mut lines = text.lines();
-            if let Some(header) = lines.next() {
-                logger.columns = header.split(',').map(str::to_string).collect();
-                for line in lines {
-                    let row = logger
-                        .columns
-                        .iter()
-                        .zip(line.split(','))
+            let mut rows = records(&text).filter_map(|(_, r)| r.ok());
+            if let Some(header) = rows.next() {
+                logger.columns = header.iter().map(str::to_string).collect();
+                for cells in rows {
+                    let row = (logger.columns.iter())
+                        .zip(cells.iter())
                         .filter_map(|(c, v)| v.parse::<f64>().ok().map(|v| (c.clone(), v)))
                         .collect();
                     logger.rows.push(row);
@@ -50,13 +77,13 @@ impl CsvLogger {
             }
         }
         let row: BTreeMap<String, f64> = values.iter().map(|(k, v)| (k.to_string(), *v)).collect();
-        let line = self.format_row(&row);
+        let line = self.format_row(&row)?;
         self.rows.push(row);
         if new_column || self.rows.len() == 1 {
             self.rewrite()
         } else {
             let mut file = std::fs::OpenOptions::new().append(true).open(&self.path)?;
-            writeln!(file, "{line}")
+            file.write_all(&line)
         }
     }
 
@@ -72,22 +99,18 @@ impl CsvLogger {
         Ok(())
     }
 
-    fn format_row(&self, row: &BTreeMap<String, f64>) -> String {
-        self.columns
-            .iter()
-            .map(|c| row.get(c).map(|v| format!("{v}")).unwrap_or_default())
-            .collect::<Vec<_>>()
-            .join(",")
+    fn format_row(&self, row: &BTreeMap<String, f64>) -> io::Result<Vec<u8>> {
+        record(
+            (self.columns.iter()).map(|c| row.get(c).map(|v| format!("{v}")).unwrap_or_default()),
+        )
     }
 
     fn rewrite(&self) -> io::Result<()> {
-        let mut text = self.columns.join(",");
-        text.push('\n');
+        let mut text = record(&self.columns)?;
         for row in &self.rows {
-            text.push_str(&self.format_row(row));
-            text.push('\n');
+            text.extend(self.format_row(row)?);
         }
-        fairgrasp_env::atomic::write(&self.path, text.as_bytes())
+        fairgrasp_env::atomic::write(&self.path, &text)
     }
 
     pub fn path(&self) -> &Path {
@@ -139,20 +162,27 @@ impl ProgressLog {
             line,
             problem,
         };
-        let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l));
-        let header = lines
-            .by_ref()
-            .find(|(_, l)| !l.trim().is_empty())
-            .ok_or_else(|| ProgressError::Empty {
-                path: path.to_path_buf(),
-            })?;
-        let columns: Vec<String> = header.1.split(',').map(|c| c.trim().to_string()).collect();
+        let mut lines = records(text).filter(|(_, r)| {
+            // A blank line reads as one empty field.
+            !matches!(r, Ok(rec) if rec.len() == 1 && rec[0].trim().is_empty())
+        });
+        let (header_line, header) = lines.next().ok_or_else(|| ProgressError::Empty {
+            path: path.to_path_buf(),
+        })?;
+        let header = header.map_err(|e| garbled(header_line, e.to_string()))?;
+        let columns: Vec<String> = header.iter().map(|c| c.trim().to_string()).collect();
         for (i, name) in columns.iter().enumerate() {
             if name.is_empty() {
-                return Err(garbled(header.0, format!("column {} has no name", i + 1)));
+                return Err(garbled(
+                    header_line,
+                    format!("column {} has no name", i + 1),
+                ));
             }
             if columns[..i].contains(name) {
-                return Err(garbled(header.0, format!("column `{name}` appears twice")));
+                return Err(garbled(
+                    header_line,
+                    format!("column `{name}` appears twice"),
+                ));
             }
         }
         // The logger appends while a run trains: a last line without its newline may be a row
@@ -160,11 +190,11 @@ impl ProgressLog {
         let unfinished_tail = !text.ends_with('\n');
         let last_line = text.lines().count();
         let mut rows = Vec::new();
-        for (number, line) in lines {
-            if line.trim().is_empty() {
-                continue;
-            }
-            match Self::parse_row(line, &columns) {
+        for (number, record) in lines {
+            let row = record
+                .map_err(|e| e.to_string())
+                .and_then(|cells| Self::parse_row(&cells, &columns));
+            match row {
                 Ok(row) => rows.push(row),
                 Err(_) if unfinished_tail && number == last_line => {}
                 Err(problem) => return Err(garbled(number, problem)),
@@ -173,8 +203,10 @@ impl ProgressLog {
         Ok(Self { columns, rows })
     }
 
-    fn parse_row(line: &str, columns: &[String]) -> Result<Vec<Option<f64>>, String> {
-        let cells: Vec<&str> = line.split(',').collect();
+    fn parse_row(
+        cells: &csv::StringRecord,
+        columns: &[String],
+    ) -> Result<Vec<Option<f64>>, String> {
         if cells.len() != columns.len() {
             return Err(format!(
                 "{} cells, but the header has {} columns",
@@ -242,6 +274,31 @@ mod tests {
                 .unwrap()
                 .ends_with("300,2,\n400,,\n")
         );
+    }
+
+    #[test]
+    fn tags_with_commas_and_quotes_are_quoted_and_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut log = CsvLogger::open(dir.path()).unwrap();
+        let odd = "eval/extras/a,b \"c\"";
+        log.write_row(&[("time/total_timesteps", 1.0), (odd, 0.5)])
+            .unwrap();
+        log.write_row(&[("time/total_timesteps", 2.0), (odd, 0.25)])
+            .unwrap();
+        let text = std::fs::read_to_string(log.path()).unwrap();
+        assert_eq!(
+            text,
+            "time/total_timesteps,\"eval/extras/a,b \"\"c\"\"\"\n1,0.5\n2,0.25\n"
+        );
+        let read = ProgressLog::read(log.path()).unwrap();
+        assert_eq!(read.columns, ["time/total_timesteps", odd]);
+        assert_eq!(
+            read.values(odd).collect::<Vec<_>>(),
+            [Some(0.5), Some(0.25)]
+        );
+        let again = CsvLogger::open(dir.path()).unwrap();
+        assert_eq!(again.columns, ["time/total_timesteps", odd]);
+        assert_eq!(again.rows.len(), 2);
     }
 
     #[test]
