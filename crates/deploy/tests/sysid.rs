@@ -169,9 +169,9 @@ fn the_clocks_align_whatever_the_latency() {
 /// On the controller model on a simulated clock, which no load on the host can disturb: each
 /// call's reply latency drawn from 0.5-2.5 ms (a LAN), encoder noise 0.01 deg. Every delay and
 /// every lag within 10 % of the injected, for two recordings (seeds 1-12: at most 6.0 % off on
-/// a delay and 6.4 % on a lag; at a fixed 0.5 or 2 ms latency, 7.2 % and 9.1 %). Before the
-/// set points swept across the stream's frames, the replay stepped on the frames' grid and the
-/// refinement searched along the valley, seed 4's joint 1 came out 13.4 ms for 12 ms.
+/// a delay and 6.4 % on a lag; at a fixed 0.5 or 2 ms latency, 7.2 % and 9.1 %). Without the
+/// set points' sweep across the stream's frames, the replay's steps on the frames' grid and
+/// the refinement's moves along the valley, seed 4's joint 1 came out 13.4 ms for 12 ms.
 ///
 /// The delay and the lag trade against each other, told apart only by the chirp's top
 /// frequencies (at 4 Hz a 15 ms lag takes 6 % off an amplitude held under 1 deg by the plan's

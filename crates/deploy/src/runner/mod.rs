@@ -410,7 +410,7 @@ impl Deployment {
             // The speed scale slows the gripper as it slows the arm: at 0.25 with the gripper
             // at full speed, one control step (133 ms) let a flickering close command shut
             // the fingers that training's 33 ms steps only started, and a kinematic-drive
-            // policy shoved the cube to the workspace box's edge (twin, session 13).
+            // policy shoved the cube to the workspace box's edge on the twin.
             speed_percent: (100.0 * self.options.safety.speed_scale)
                 .round()
                 .clamp(1.0, 100.0) as u8,

@@ -347,9 +347,9 @@ impl Task for Sort {
         }
         // Stage of the active object in [0, 1]: reach, grasp, carry to its drop point, and
         // full once it is over its bin, held or falling, so that letting go there never
-        // lowers the reward (it only adds the sort bonus once the object rests). Session 4's
-        // reward divided this stage by n and dropped it on release: the policy grasped
-        // 97 % of the time and never sorted one object in 55 minutes.
+        // lowers the reward (it only adds the sort bonus once the object rests). With the stage
+        // divided by n and dropped on release, the policy grasped 97 % of the time and never
+        // sorted one object in 55 minutes.
         let stage = match self.active() {
             None => 1.0,
             Some(i) if self.over_own_bin(i, s) => 1.0,

@@ -5,7 +5,7 @@
 //! hundred microseconds repeated thousands of times a second. `rayon::ThreadPool::install`
 //! from outside the pool puts the caller to sleep on a futex and lets idle workers fall
 //! asleep between steps, so every step paid two or three wake-ups: 2 envs on 2 threads ran
-//! 1.28× one thread, where two free-running threads reached 1.85× (session 7, 2-core host).
+//! 1.28× one thread, where two free-running threads reached 1.85× (2-core host).
 //! Here the caller steps its own share, and workers spin for a short window before parking
 //! (as EnvPool's workers do), so a step that follows the last one within the window costs no
 //! system call at all.

@@ -6,7 +6,7 @@
 //! trajectory within speed and acceleration limits whatever the payload. Here every arm joint
 //! moves through a [`JointRamp`] each physics step, and the links are kinematic bodies placed
 //! by forward kinematics, so rapier computes no articulated mass matrix for them (that work was
-//! about 20–25 % of a PPO run's profile, session 7). The gripper's joints stay dynamic: its
+//! about 20–25 % of a PPO run's profile). The gripper's joints stay dynamic: its
 //! fingers are dynamic bodies on impulse joints with PD motors, so they stop on an object and
 //! squeeze it with the configured force.
 
