@@ -1,14 +1,13 @@
 //! `fairgrasp env …`: list, check, exercise and measure the registered environments.
 
 use anyhow::{Context, Result};
-use fairgrasp_env::arm::ActionMode;
 use fairgrasp_env::arm::{ArmEnv, Task};
-use fairgrasp_env::check::{CheckReport, check_env};
+use fairgrasp_env::check::{CheckReport, CheckVariant, check_env, variants as check_variants};
 use fairgrasp_env::config::from_table;
 use fairgrasp_env::config::{apply_override, read_table};
 use fairgrasp_env::scripted::ScriptedGraspPolicy;
 use fairgrasp_env::sim::rapier3d::na::{Isometry3, Point3, Vector3};
-use fairgrasp_env::tasks::grasp::{GraspConfig, ObservationPreset, RewardKind};
+use fairgrasp_env::tasks::grasp::GraspConfig;
 use fairgrasp_env::tasks::pick_place::PickPlaceEnv;
 use fairgrasp_env::tasks::sort::SortEnv;
 use fairgrasp_env::{Env, EpisodeEvent, GraspEnv, Info, VecEnv, VectorEnv, registry};
@@ -176,60 +175,19 @@ fn print_report(label: &str, report: &CheckReport) {
     }
 }
 
-/// The variants `env check` runs: (label, overrides on top of the user's settings).
-fn variants(id: &str) -> Vec<(String, Vec<String>)> {
-    let mut out = Vec::new();
-    let is_arm = id.starts_with("FaArm");
-    for randomize in [false, true] {
-        for mode in [ActionMode::Joint, ActionMode::Cartesian] {
-            let mut common = vec![
-                format!("randomization.enabled={randomize}"),
-                format!("control.action_mode=\"{}\"", mode_name(mode)),
-            ];
-            if id == fairgrasp_env::ENV_ID {
-                for obs in [ObservationPreset::Seed23, ObservationPreset::Rich] {
-                    for reward in [RewardKind::Sparse, RewardKind::Hybrid, RewardKind::Staged] {
-                        let mut o = common.clone();
-                        o.push(format!(
-                            "task.observation=\"{}\"",
-                            snake(&format!("{obs:?}"))
-                        ));
-                        o.push(format!("reward.kind=\"{}\"", snake(&format!("{reward:?}"))));
-                        out.push((o.join(" "), o));
-                    }
-                }
-            } else if is_arm {
-                out.push((common.join(" "), std::mem::take(&mut common)));
-            }
-        }
-    }
-    if out.is_empty() {
-        out.push(("defaults".into(), Vec::new()));
-    }
-    out
-}
-
-fn mode_name(mode: ActionMode) -> &'static str {
-    match mode {
-        ActionMode::Joint => "joint",
-        ActionMode::Cartesian => "cartesian",
-    }
-}
-
-fn snake(name: &str) -> String {
-    name.to_lowercase()
-}
-
 fn check(args: &CheckArgs) -> Result<()> {
     let base = args.env.table()?;
     let variants = if args.only {
-        vec![("as configured".to_string(), Vec::new())]
+        vec![CheckVariant {
+            label: "as configured".into(),
+            overrides: Vec::new(),
+        }]
     } else {
-        variants(&args.env.id)
+        check_variants(&args.env.id)
     };
     let started = Instant::now();
     let mut failures = 0;
-    for (label, overrides) in &variants {
+    for CheckVariant { label, overrides } in &variants {
         let mut table = base.clone();
         for item in overrides {
             apply_override(&mut table, item)?;

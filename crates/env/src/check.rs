@@ -2,9 +2,65 @@
 //! and step signatures, info), seeding determinism, rejection of bad actions, and a random-action
 //! rollout that must produce no NaN and end every episode for a known reason.
 
+use crate::arm::ActionMode;
 use crate::core::{Env, EpisodeEvent};
+use crate::tasks::grasp::all_variants;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+/// One configuration a check runs: `key=value` overrides (the CLI's `--set` form) laid over the
+/// user's settings, and a label that lists them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckVariant {
+    pub label: String,
+    pub overrides: Vec<String>,
+}
+
+/// The configurations `fairgrasp env check` runs for `env_id`, each with and without domain
+/// randomisation: for the grasp every observation × action × reward variant
+/// ([`all_variants`]: 24 in all), for the other arm tasks each action mode, for any other env
+/// its defaults.
+pub fn variants(env_id: &str) -> Vec<CheckVariant> {
+    let mut out = Vec::new();
+    for randomize in [false, true] {
+        let with = |mut settings: Vec<String>| {
+            settings.insert(0, format!("randomization.enabled={randomize}"));
+            CheckVariant {
+                label: settings.join(" "),
+                overrides: settings,
+            }
+        };
+        if env_id == crate::ENV_ID {
+            for (obs, mode, reward) in all_variants() {
+                out.push(with(vec![
+                    format!("control.action_mode={}", spelled(&mode)),
+                    format!("task.observation={}", spelled(&obs)),
+                    format!("reward.kind={}", spelled(&reward)),
+                ]));
+            }
+        } else if env_id.starts_with("FaArm") {
+            for mode in [ActionMode::Joint, ActionMode::Cartesian] {
+                out.push(with(vec![format!(
+                    "control.action_mode={}",
+                    spelled(&mode)
+                )]));
+            }
+        }
+    }
+    if out.is_empty() {
+        out.push(CheckVariant {
+            label: "defaults".into(),
+            overrides: Vec::new(),
+        });
+    }
+    out
+}
+
+/// A setting's value as a config file spells it (its serde name, quoted for a string).
+fn spelled<T: Serialize>(value: &T) -> String {
+    toml::Value::try_from(value).map_or_else(|e| e.to_string(), |v| v.to_string())
+}
 
 /// How one episode of the random rollout ended.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

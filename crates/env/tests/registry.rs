@@ -148,3 +148,45 @@ fn an_arm_world_starts_its_episodes_as_the_nominal_env_resets() {
         assert_eq!(a.arm_positions(), b.arm_positions());
     }
 }
+
+/// `fairgrasp env check`'s variants, each through the library's checker (the contract, seeding,
+/// bad actions, a random rollout): every one of the grasp's 24 and the other arm tasks' 4 each.
+#[test]
+fn the_checker_passes_every_variant_of_every_arm_task() {
+    use fairgrasp_env::check::{check_env, variants};
+    use fairgrasp_env::config::apply_override;
+    let grasp = variants(fairgrasp_env::ENV_ID);
+    assert_eq!(grasp.len(), 24);
+    let labels: std::collections::HashSet<&str> = grasp.iter().map(|v| v.label.as_str()).collect();
+    assert_eq!(labels.len(), 24, "each variant its own");
+    assert!(labels.contains(
+        "randomization.enabled=true control.action_mode=\"joint\" task.observation=\"rich\" \
+         reward.kind=\"hybrid\""
+    ));
+    for spec in registry::specs()
+        .into_iter()
+        .filter(|s| s.id.starts_with("FaArm"))
+    {
+        let variants = variants(spec.id);
+        if spec.id != fairgrasp_env::ENV_ID {
+            assert_eq!(variants.len(), 4, "{}", spec.id);
+        }
+        for variant in variants {
+            let mut table = toml::Table::new();
+            for item in &variant.overrides {
+                apply_override(&mut table, item).unwrap();
+            }
+            let mut env = make(spec.id, &table).unwrap();
+            let mut twin = make(spec.id, &table).unwrap();
+            let report = check_env(&mut env, &mut twin, 300, 0);
+            assert!(
+                report.passed(),
+                "{} {}: {:?}",
+                spec.id,
+                variant.label,
+                report.checks
+            );
+            assert_eq!(report.rollout_steps, 300);
+        }
+    }
+}
