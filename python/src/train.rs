@@ -61,7 +61,7 @@ fn config_table(
     match config {
         None => builtin_table(
             env_id.unwrap_or(fairgrasp_env::ENV_ID),
-            algo.unwrap_or("ppo"),
+            algo.unwrap_or("ppo").parse().map_err(rl_error)?,
         )
         .map_err(rl_error),
         Some(value) => {
@@ -236,7 +236,8 @@ pub fn evaluate(
 pub fn default_train_config(env_id: Option<&str>, algo: Option<&str>) -> PyResult<String> {
     let id = env_id.unwrap_or(fairgrasp_env::ENV_ID);
     fairgrasp_env::registry::spec(id).map_err(crate::errors::env_error)?;
-    let mut table = builtin_table(id, algo.unwrap_or("ppo")).map_err(rl_error)?;
+    let algo_named = algo.unwrap_or("ppo").parse().map_err(rl_error)?;
+    let mut table = builtin_table(id, algo_named).map_err(rl_error)?;
     table.insert("env_id".into(), toml::Value::String(id.into()));
     if let Some(algo) = algo {
         table.insert("algo".into(), toml::Value::String(algo.into()));

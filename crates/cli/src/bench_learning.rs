@@ -9,15 +9,15 @@
 use anyhow::{Context, Result, bail};
 use fairgrasp_rl::logger::ProgressLog;
 use fairgrasp_rl::policies::Policy;
-use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary};
+use fairgrasp_rl::train::{Algo, EvalResult, HELD_OUT_SEED_BASE, TrainSummary};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct LearningBenchArgs {
     /// Algorithms to train, in order [default: ppo and sac].
-    #[arg(long = "algo", value_parser = ["ppo", "sac", "td3"])]
-    pub algos: Vec<String>,
+    #[arg(long = "algo", value_parser = crate::train_cmd::algo_parser())]
+    pub algos: Vec<Algo>,
     /// Summarise a finished run instead of training: `--run ppo=runs/ppo_grasp`.
     #[arg(long = "run", value_name = "ALGO=RUN_DIR")]
     pub runs: Vec<String>,
@@ -71,11 +71,11 @@ pub fn run(args: &LearningBenchArgs) -> Result<()> {
         jobs.push((algo.to_string(), Some(PathBuf::from(dir))));
     }
     let algos = if args.algos.is_empty() && jobs.is_empty() {
-        vec!["ppo".to_string(), "sac".to_string()]
+        vec![Algo::Ppo, Algo::Sac]
     } else {
         args.algos.clone()
     };
-    jobs.extend(algos.into_iter().map(|a| (a, None)));
+    jobs.extend(algos.into_iter().map(|a| (a.as_str().to_string(), None)));
     let mut results = Vec::new();
     for (algo, dir) in jobs {
         let dir = match dir {

@@ -30,7 +30,10 @@ pub struct SacBenchArgs {
 pub fn run(args: &SacBenchArgs) -> Result<()> {
     ensure!(args.seconds > 0.0, "--seconds must be positive");
     ensure!(args.transitions > 0, "--transitions must be at least 1");
-    let table = fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, "sac")?;
+    let table = fairgrasp_rl::configs::builtin_table(
+        fairgrasp_env::ENV_ID,
+        fairgrasp_rl::train::Algo::Sac,
+    )?;
     let config = TrainConfig::from_toml_str(&table.to_string(), &args.overrides)?;
     let env = registry::make(&config.env_id, &config.env)?;
     let (obs_dim, act_dim) = (

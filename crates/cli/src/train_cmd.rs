@@ -3,12 +3,19 @@
 
 use anyhow::{Context, Result, bail};
 use fairgrasp_rl::configs::{builtin_table, default_run_dir, holds_a_run};
-use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume_until, train_until};
+use fairgrasp_rl::train::{Algo, Progress, TrainConfig, TrainSummary, resume_until, train_until};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+/// `--algo`: the names of [`Algo::ALL`], listed in the help and completed by the shell.
+pub fn algo_parser() -> impl clap::builder::TypedValueParser<Value = Algo> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Algo::ALL.map(Algo::as_str))
+        .try_map(|name| name.parse::<Algo>())
+}
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
@@ -17,9 +24,9 @@ pub struct TrainArgs {
     /// Without it, the built-in default of the algorithm.
     #[arg(long, conflicts_with = "resume")]
     pub config: Option<PathBuf>,
-    /// Algorithm: ppo, sac or td3 (overrides the config's `algo`).
-    #[arg(long, value_parser = ["ppo", "sac", "td3"], conflicts_with = "resume")]
-    pub algo: Option<String>,
+    /// Algorithm (overrides the config's `algo`).
+    #[arg(long, value_parser = algo_parser(), conflicts_with = "resume")]
+    pub algo: Option<Algo>,
     /// The environment to learn (`fairgrasp env list`), overriding the config's `env_id`
     /// [default: FaArmGrasp-v0].
     #[arg(long, conflicts_with = "resume")]
@@ -81,8 +88,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     if let Some(s) = args.seed {
         overrides.push(format!("seed={s}"));
     }
-    if let Some(algo) = &args.algo {
-        overrides.push(format!("algo=\"{algo}\""));
+    if let Some(algo) = args.algo {
+        overrides.push(format!("algo=\"{}\"", algo.as_str()));
     }
     if let Some(env) = &args.env {
         fairgrasp_env::registry::spec(env)?;
@@ -105,8 +112,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         ),
         None => {
             let env_id = args.env.as_deref().unwrap_or(fairgrasp_env::ENV_ID);
-            let algo = args.algo.as_deref().unwrap_or("ppo");
-            let table = builtin_table(env_id, algo)?;
+            let table = builtin_table(env_id, args.algo.unwrap_or_default())?;
             (table.to_string(), "invalid settings".into())
         }
     };

@@ -164,7 +164,7 @@ fn the_checker_passes_every_variant_of_every_arm_task() {
          reward.kind=\"hybrid\""
     ));
     for spec in registry::specs()
-        .into_iter()
+        .iter()
         .filter(|s| s.id.starts_with("FaArm"))
     {
         let variants = variants(spec.id);

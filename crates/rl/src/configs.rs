@@ -2,6 +2,7 @@
 //! train` and Python's `fairgrasp.train()` start from the same tuned settings in any directory.
 
 use crate::error::{Result, RlError};
+use crate::train::Algo;
 use std::path::{Path, PathBuf};
 
 pub const PPO_GRASP_TOML: &str = include_str!("../../../configs/ppo_grasp.toml");
@@ -12,22 +13,22 @@ pub const PPO_SORT_TOML: &str = include_str!("../../../configs/ppo_sort.toml");
 
 /// The built-in configuration text for an env and algorithm, and whether it was tuned for that
 /// env (else it is the algorithm's grasp file, whose `[env]` table is the grasp task's).
-pub fn builtin_config(env_id: &str, algo: &str) -> (&'static str, bool) {
+pub fn builtin_config(env_id: &str, algo: Algo) -> (&'static str, bool) {
     match (env_id, algo) {
-        ("FaArmPickPlace-v0", "ppo") => (PPO_PICK_PLACE_TOML, true),
-        ("FaArmSort-v0", "ppo") => (PPO_SORT_TOML, true),
-        (fairgrasp_env::ENV_ID, "sac") => (SAC_GRASP_TOML, true),
-        (fairgrasp_env::ENV_ID, "td3") => (TD3_GRASP_TOML, true),
-        (fairgrasp_env::ENV_ID, _) => (PPO_GRASP_TOML, true),
-        (_, "sac") => (SAC_GRASP_TOML, false),
-        (_, "td3") => (TD3_GRASP_TOML, false),
-        _ => (PPO_GRASP_TOML, false),
+        ("FaArmPickPlace-v0", Algo::Ppo) => (PPO_PICK_PLACE_TOML, true),
+        ("FaArmSort-v0", Algo::Ppo) => (PPO_SORT_TOML, true),
+        (fairgrasp_env::ENV_ID, Algo::Ppo) => (PPO_GRASP_TOML, true),
+        (fairgrasp_env::ENV_ID, Algo::Sac) => (SAC_GRASP_TOML, true),
+        (fairgrasp_env::ENV_ID, Algo::Td3) => (TD3_GRASP_TOML, true),
+        (_, Algo::Ppo) => (PPO_GRASP_TOML, false),
+        (_, Algo::Sac) => (SAC_GRASP_TOML, false),
+        (_, Algo::Td3) => (TD3_GRASP_TOML, false),
     }
 }
 
 /// The starting table of a run of `algo` on `env_id`: the tuned file where there is one, else
 /// the algorithm's grasp settings with the env's own defaults (its `[env]` table dropped).
-pub fn builtin_table(env_id: &str, algo: &str) -> Result<toml::Table> {
+pub fn builtin_table(env_id: &str, algo: Algo) -> Result<toml::Table> {
     let (text, tuned) = builtin_config(env_id, algo);
     let mut table: toml::Table = text
         .parse()
@@ -87,14 +88,17 @@ mod tests {
     #[test]
     fn every_builtin_config_parses_and_untuned_ones_take_the_envs_defaults() {
         for id in fairgrasp_env::registry::ids() {
-            for algo in ["ppo", "sac", "td3"] {
+            for algo in Algo::ALL {
                 let table = builtin_table(id, algo).unwrap();
                 let config = TrainConfig::from_toml_str(
                     &table.to_string(),
-                    &[format!("env_id=\"{id}\""), format!("algo=\"{algo}\"")],
+                    &[
+                        format!("env_id=\"{id}\""),
+                        format!("algo=\"{}\"", algo.as_str()),
+                    ],
                 )
                 .unwrap_or_else(|e| panic!("{id}/{algo}: {e}"));
-                assert_eq!(config.algo.as_str(), algo);
+                assert_eq!(config.algo, algo);
                 if !builtin_config(id, algo).1 {
                     assert!(
                         config.env.is_empty(),

@@ -40,12 +40,39 @@ pub enum Algo {
 }
 
 impl Algo {
+    /// Every algorithm, in the order help texts list them.
+    pub const ALL: [Algo; 3] = [Algo::Ppo, Algo::Sac, Algo::Td3];
+
+    /// The name configs, saved models and the command line use.
     pub fn as_str(self) -> &'static str {
         match self {
             Algo::Ppo => "ppo",
             Algo::Sac => "sac",
             Algo::Td3 => "td3",
         }
+    }
+}
+
+impl std::fmt::Display for Algo {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for Algo {
+    type Err = RlError;
+
+    fn from_str(name: &str) -> Result<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|a| a.as_str() == name)
+            .ok_or_else(|| RlError::Config {
+                key: "algo".into(),
+                problem: format!(
+                    "unknown algorithm `{name}` (one of {})",
+                    Self::ALL.map(Algo::as_str).join(", ")
+                ),
+            })
     }
 }
 

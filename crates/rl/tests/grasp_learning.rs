@@ -13,7 +13,7 @@ use fairgrasp_rl::train::{HELD_OUT_SEED_BASE, TrainConfig, train};
 
 #[test]
 fn the_default_training_reaches_its_stop_rule_and_its_model_grasps_held_out_episodes() {
-    let table = builtin_table(ENV_ID, "ppo").unwrap();
+    let table = builtin_table(ENV_ID, fairgrasp_rl::train::Algo::Ppo).unwrap();
     let config = TrainConfig::from_toml_str(
         &table.to_string(),
         &["total_timesteps=1000000".into(), "checkpoint_freq=0".into()],

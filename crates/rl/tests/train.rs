@@ -559,8 +559,8 @@ fn gemm_kernel() -> Option<&'static str> {
 #[test]
 fn short_runs_of_the_shipped_configs_train_pinned_weights() {
     let short = ["threads=1", "checkpoint_freq=1000000", "eval.freq=1000000"];
-    let builtin = |algo| {
-        fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, algo)
+    let builtin = |algo: &str| {
+        fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, algo.parse().unwrap())
             .unwrap()
             .to_string()
     };
