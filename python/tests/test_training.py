@@ -98,6 +98,10 @@ def test_bad_training_settings_raise_config_error_naming_the_key(tmp_path):
         fairgrasp.train(env_id="PointReach-v0", run_dir=tmp_path / "z")
     assert 'env_id = "FaArmGrasp-v0"' in fairgrasp.default_train_config()
     assert 'algo = "sac"' in fairgrasp.default_train_config(algo="sac")
+    with pytest.raises(fairgrasp.ConfigError, match="unknown algorithm `dqn` \\(one of ppo, sac, td3\\)"):
+        fairgrasp.default_train_config(algo="dqn")
+    with pytest.raises(fairgrasp.ConfigError, match="unknown algorithm `dqn`"):
+        fairgrasp.train(algo="dqn", run_dir=tmp_path / "w")
 
 
 def test_importing_fairgrasp_runs_the_networks_on_one_thread_unless_told_otherwise():
