@@ -552,16 +552,22 @@ fn vec_normalize_save_load_round_trip_is_exact_and_atomic() {
         "{text}"
     );
 
-    // Saving into a missing directory fails, names the file and leaves nothing behind.
-    let missing = dir.path().join("no/such/dir/stats.json");
-    match venv.save(&missing).unwrap_err() {
+    // Saving where no directory can be made (under a file) fails, names the file and leaves
+    // nothing behind; a missing directory is made, as for every saved file.
+    let blocked = path.join("no/dir/stats.json");
+    match venv.save(&blocked).unwrap_err() {
         EnvError::File { path, problem } => {
-            assert!(path.ends_with("no/such/dir/stats.json"), "{path}");
+            assert!(
+                path.ends_with("vec_normalize.json/no/dir/stats.json"),
+                "{path}"
+            );
             assert!(problem.contains("cannot write"), "{problem}");
         }
         e => panic!("unexpected {e:?}"),
     }
     assert_eq!(dir_entries(dir.path()), vec!["vec_normalize.json"]);
+    venv.save(&dir.path().join("new/dir/stats.json")).unwrap();
+    assert!(VecNormalizeState::load(&dir.path().join("new/dir/stats.json")).is_ok());
 }
 
 fn load_error(path: &Path, obs_dim: usize) -> (String, String) {
