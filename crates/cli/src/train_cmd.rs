@@ -89,7 +89,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         overrides.push(format!("seed={s}"));
     }
     if let Some(algo) = args.algo {
-        overrides.push(format!("algo=\"{}\"", algo.as_str()));
+        overrides.push(format!("algo=\"{algo}\""));
     }
     if let Some(env) = &args.env {
         fairgrasp_env::registry::spec(env)?;

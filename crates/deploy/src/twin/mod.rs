@@ -54,7 +54,7 @@ use crate::pose_source::PoseMessage;
 use crate::robot::RobotState;
 use call_log::{CallLog, CallRecord};
 use controller::{Controller, ControllerConfig, StartState, pose_to_wire};
-use fairgrasp_env::random::standard_normal_f64 as gaussian;
+use fairgrasp_env::random::standard_normal_f64;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::Isometry3;
 use faults::{FaultCommand, FaultSettings};
@@ -217,7 +217,7 @@ impl Shared {
         if noise > 0.0 {
             let mut rng = self.rng.lock().expect("rng lock");
             for q in &mut state.joints_deg {
-                *q += noise * gaussian(&mut *rng);
+                *q += noise * standard_normal_f64(&mut *rng);
             }
             let rad: Vec<f64> = state.joints_deg.iter().map(|v| v.to_radians()).collect();
             state.tcp = pose_to_wire(&self.chain.forward(&rad));
@@ -239,7 +239,7 @@ impl Shared {
         if noise_mm > 0.0 {
             let mut rng = self.rng.lock().expect("rng lock");
             for p in &mut position {
-                *p += noise_mm / 1000.0 * gaussian(&mut *rng);
+                *p += noise_mm / 1000.0 * standard_normal_f64(&mut *rng);
             }
         }
         let q = pose.rotation.quaternion();

@@ -19,7 +19,7 @@ use crate::fairino::error_codes::error_code_meaning;
 use crate::pose_source::{PoseMessage, PoseSource, ReceivedPose};
 use crate::robot::{RobotCommand, RobotLink, RobotState, StampedState};
 use crate::runner::EpisodeHost;
-use fairgrasp_env::random::standard_normal_f64 as gaussian;
+use fairgrasp_env::random::standard_normal_f64;
 use fairgrasp_sim::rapier3d::na::Isometry3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -135,7 +135,7 @@ impl Inner {
         let mut state = self.controller.state();
         if self.settings.joint_noise_deg > 0.0 {
             for q in &mut state.joints_deg {
-                *q += self.settings.joint_noise_deg * gaussian(&mut self.rng);
+                *q += self.settings.joint_noise_deg * standard_normal_f64(&mut self.rng);
             }
         }
         self.streamed = (now, state, self.streamed.2 + 1);
