@@ -20,7 +20,9 @@ use rapier3d::na::{Isometry3, Point3, Vector3};
 /// A sphere of the envelope in its link's frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sphere {
+    /// Centre in the link's frame (m).
     pub centre: Point3<f64>,
+    /// Radius (m); 0 for a corner of a box's or mesh's bounding box.
     pub radius: f64,
 }
 
@@ -95,6 +97,7 @@ impl Envelope {
         self.links.iter().flatten().map(|p| p.spheres.len()).sum()
     }
 
+    /// Whether the envelope has no sphere: no link it covers carries a collision shape.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

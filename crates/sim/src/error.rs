@@ -8,7 +8,9 @@ pub enum SimError {
     /// A file could not be read.
     #[error("cannot read {path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The underlying I/O error.
         #[source]
         source: std::io::Error,
     },
@@ -20,6 +22,7 @@ pub enum SimError {
          e.g. `xacro {source_name} > robot.urdf` (ROS) or `python -m xacro {source_name} -o robot.urdf`"
     )]
     Xacro {
+        /// The file (or bundled asset) the description came from.
         source_name: String,
         /// Line of the first xacro element or substitution.
         line: u32,
@@ -33,19 +36,29 @@ pub enum SimError {
         source_name: String,
         /// The element at fault, e.g. `joint 'j2'` or `line 14, column 3`.
         location: String,
+        /// What is wrong with it.
         problem: String,
     },
     /// A mesh file referenced by the description is missing, unsupported or corrupt.
     #[error("{source_name}: {location}: mesh '{uri}': {problem}")]
     Mesh {
+        /// The file (or bundled asset) the description came from.
         source_name: String,
+        /// The element referencing the mesh, e.g. `link 'finger' <visual> #1`.
         location: String,
+        /// The mesh's `filename` as written in the description (e.g. `package://…`).
         uri: String,
+        /// What is wrong: the URI does not resolve, or the file is missing, unsupported or corrupt.
         problem: String,
     },
     /// A scene, controller or gripper setting is out of range.
     #[error("invalid setting `{key}`: {problem}")]
-    Config { key: String, problem: String },
+    Config {
+        /// The setting's key, e.g. `physics.substeps` or `objects[0].shape.radius`.
+        key: String,
+        /// Why its value is refused, e.g. `must be at least 1`.
+        problem: String,
+    },
     /// A command given to the simulator (a joint target, a torque, a pose) is not usable.
     #[error("invalid command: {0}")]
     Command(String),

@@ -9,6 +9,8 @@
 //! - [`pick`]: a scripted pick-and-lift controller and the task's success rule;
 //! - [`assets`]: the bundled FR5 and gripper descriptions.
 
+#![warn(missing_docs)]
+
 pub mod assets;
 pub mod control;
 pub mod envelope;

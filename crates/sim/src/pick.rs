@@ -84,11 +84,13 @@ impl GraspStatus {
 /// Counts consecutive control steps that satisfy the rule.
 #[derive(Clone, Debug, Default)]
 pub struct SuccessTracker {
+    /// The rule each step is judged by.
     pub rule: SuccessRule,
     consecutive: u32,
 }
 
 impl SuccessTracker {
+    /// A tracker for `rule` with no step counted yet.
     pub fn new(rule: SuccessRule) -> Self {
         Self {
             rule,
@@ -106,10 +108,13 @@ impl SuccessTracker {
         self.succeeded()
     }
 
+    /// Whether the rule holds for at least `rule.hold_steps` consecutive steps, up to the last
+    /// step fed.
     pub fn succeeded(&self) -> bool {
         self.consecutive >= self.rule.hold_steps
     }
 
+    /// Consecutive steps, ending with the last step fed, that satisfied the rule.
     pub fn consecutive(&self) -> u32 {
         self.consecutive
     }
@@ -122,11 +127,15 @@ pub struct PickScript {
     pub approach_height: f64,
     /// How far to lift (m).
     pub lift_height: f64,
-    /// Durations (s).
+    /// Duration of the joint-space move above the object (s).
     pub approach_time: f64,
+    /// Duration of the straight descent to the grasp pose (s).
     pub descend_time: f64,
+    /// Time given to the fingers to close (s).
     pub close_time: f64,
+    /// Duration of the straight lift (s).
     pub lift_time: f64,
+    /// Time the object is held still at the top, its drift measured (s).
     pub hold_time: f64,
 }
 
@@ -175,20 +184,39 @@ impl fmt::Display for PickPhase {
 #[derive(Clone, Debug, PartialEq)]
 pub enum PickFailure {
     /// Inverse kinematics found no joint vector for a pose the script needed in `phase`.
-    Unreachable { phase: PickPhase },
+    Unreachable {
+        /// The phase that needed the pose.
+        phase: PickPhase,
+    },
     /// When the fingers had closed, they did not hold the object between both pads.
     FingersMissed,
     /// The object was gripped after closing but was no longer held up at the end. `lift` is the
     /// highest its centre rose above rest during the lift and hold (m).
-    ObjectSlipped { lift: f64 },
+    ObjectSlipped {
+        /// Highest lift of the object's centre above rest (m).
+        lift: f64,
+    },
     /// At the end the object was gripped and lifted, but its centre was `offset` (m) from the TCP,
     /// more than the rule's `max_offset` (m).
-    HeldOffCentre { offset: f64, max_offset: f64 },
+    HeldOffCentre {
+        /// Distance between the object's centre and the TCP at the end (m).
+        offset: f64,
+        /// The rule's limit on that distance (m).
+        max_offset: f64,
+    },
     /// At the end the object was gripped, lifted and centred, but the rule never held for
     /// `hold_steps` consecutive steps; the longest run was `longest_run` steps.
-    TimedOut { longest_run: u32, hold_steps: u32 },
+    TimedOut {
+        /// Longest run of consecutive steps satisfying the rule.
+        longest_run: u32,
+        /// Consecutive steps the rule needs.
+        hold_steps: u32,
+    },
     /// The simulation failed (e.g. its state became non-finite).
-    Simulation { message: String },
+    Simulation {
+        /// The simulation error, as text.
+        message: String,
+    },
 }
 
 impl PickFailure {
@@ -246,11 +274,17 @@ impl fmt::Display for PickFailure {
 /// The kinds of [`PickFailure`], for counting failures by reason.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum FailureKind {
+    /// A pose the script needed was out of reach ([`PickFailure::Unreachable`]).
     Unreachable,
+    /// The fingers closed without gripping ([`PickFailure::FingersMissed`]).
     FingersMissed,
+    /// The object slipped out ([`PickFailure::ObjectSlipped`]).
     ObjectSlipped,
+    /// The object was held too far from the TCP ([`PickFailure::HeldOffCentre`]).
     HeldOffCentre,
+    /// The rule never held long enough ([`PickFailure::TimedOut`]).
     TimedOut,
+    /// The simulation failed ([`PickFailure::Simulation`]).
     Simulation,
 }
 
@@ -463,10 +497,13 @@ fn cartesian_move(
 /// Summary of many scripted picks.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PickReport {
+    /// Episodes run.
     pub episodes: u32,
+    /// Episodes that succeeded.
     pub successes: u32,
-    /// Largest and mean hold drift over successful episodes (m).
+    /// Largest hold drift over successful episodes (m); see [`PickOutcome::hold_drift`].
     pub max_drift: f64,
+    /// Mean hold drift over successful episodes (m); 0 when none succeeded.
     pub mean_drift: f64,
     /// Episodes that failed, with their seeds and why.
     pub failures: Vec<(u64, PickFailure)>,

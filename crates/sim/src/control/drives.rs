@@ -10,7 +10,9 @@ use std::collections::VecDeque;
 /// through a first-order lag of time constant `tau_ms`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct JointTracking {
+    /// Pure delay before the set point reaches the drive (ms); 0 for none.
     pub delay_ms: f64,
+    /// Time constant of the first-order lag (ms); 0 for none.
     pub tau_ms: f64,
 }
 

@@ -10,7 +10,7 @@
 /// target, and at `s` % of full speed it takes 100/`s` times as long.
 pub const FINGERS_FULL_SPEED_PERCENT_PER_S: f64 = 1500.0;
 
-/// The gripper's set point (see the [module](self) documentation).
+/// The gripper's set point (see the module documentation at the top of `control/gripper.rs`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GripperRamp {
     /// Commanded opening (%).
@@ -47,10 +47,12 @@ impl GripperRamp {
         self.setpoint
     }
 
+    /// The commanded opening (% of the stroke).
     pub fn target(&self) -> f64 {
         self.target
     }
 
+    /// Where the fingers are sent now (% of the stroke), as of the last [`advance`](Self::advance).
     pub fn setpoint(&self) -> f64 {
         self.setpoint
     }

@@ -23,7 +23,8 @@
 /// Floating-point slack in the limit checks.
 const EPS: f64 = 1e-9;
 
-/// The joint-space set-point ramp (see the [module](self) documentation).
+/// The joint-space set-point ramp (see the module documentation at the top of
+/// `control/ramp.rs`).
 #[derive(Clone, Debug)]
 pub struct JointRamp {
     lower: Vec<f64>,
@@ -59,6 +60,7 @@ impl JointRamp {
         }
     }
 
+    /// Number of joints.
     pub fn dof(&self) -> usize {
         self.lower.len()
     }

@@ -5,7 +5,9 @@ use std::path::Path;
 /// Triangles of a mesh, in the mesh file's own frame and units.
 #[derive(Clone, Debug, Default)]
 pub struct TriangleMesh {
+    /// Vertex positions.
     pub vertices: Vec<[f32; 3]>,
+    /// Vertex indices of each triangle.
     pub triangles: Vec<[u32; 3]>,
 }
 

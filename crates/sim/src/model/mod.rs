@@ -19,14 +19,18 @@ use std::path::{Path, PathBuf};
 /// A rigid transform as written in URDF: translation (m) then fixed-axis roll-pitch-yaw (rad).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Origin {
+    /// Translation (m).
     pub xyz: [f64; 3],
+    /// Roll, pitch, yaw about the fixed x, y, z axes (rad).
     pub rpy: [f64; 3],
 }
 
 /// Mass properties of a link, in the link frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Inertial {
+    /// Frame of the centre of mass and the inertia axes, in the link frame.
     pub origin: Origin,
+    /// Mass (kg), positive.
     pub mass: f64,
     /// `[ixx, ixy, ixz, iyy, iyz, izz]` about the centre of mass, in the inertial frame.
     pub inertia: [f64; 6],
@@ -35,27 +39,37 @@ pub struct Inertial {
 /// A collision or visual shape. Sizes are in metres, as in URDF.
 #[derive(Clone, Debug)]
 pub enum Geometry {
+    /// A box centred on its frame.
     Box {
+        /// Full edge lengths along x, y, z (m).
         size: [f64; 3],
     },
     /// Axis along the shape frame's z, as in URDF.
     Cylinder {
+        /// Radius (m).
         radius: f64,
+        /// Length along z (m).
         length: f64,
     },
     /// Axis along z; `length` is the distance between the two sphere centres.
     Capsule {
+        /// Radius of the cylinder and of the end spheres (m).
         radius: f64,
+        /// Distance between the two sphere centres (m).
         length: f64,
     },
+    /// A sphere centred on its frame.
     Sphere {
+        /// Radius (m).
         radius: f64,
     },
+    /// A triangle mesh loaded from a file.
     Mesh {
         /// The filename as written in the URDF (`package://…`, `file://…` or relative).
         uri: String,
         /// Where it was found on disk.
         path: PathBuf,
+        /// Scale factors along the mesh's x, y, z (positive); 1 when the URDF gives none.
         scale: [f64; 3],
         /// Triangles in the mesh's own frame, before `scale`.
         mesh: TriangleMesh,
@@ -65,7 +79,9 @@ pub enum Geometry {
 /// A geometry placed in its link's frame.
 #[derive(Clone, Debug)]
 pub struct Shape {
+    /// Pose of the geometry in the link frame.
     pub origin: Origin,
+    /// The shape itself.
     pub geometry: Geometry,
     /// RGBA colour of a visual, when the URDF gives one.
     pub rgba: Option<[f64; 4]>,
@@ -74,19 +90,26 @@ pub struct Shape {
 /// A link: a rigid body with optional mass, collision and visual shapes.
 #[derive(Clone, Debug)]
 pub struct Link {
+    /// Name, unique in the model.
     pub name: String,
     /// `None` for massless frames such as `tool0` or `world`.
     pub inertial: Option<Inertial>,
+    /// Shapes used for contacts.
     pub collisions: Vec<Shape>,
+    /// Shapes drawn, with their colours.
     pub visuals: Vec<Shape>,
 }
 
 /// The joint types a simulated arm may use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum JointKind {
+    /// Turns about its axis between limits (rad).
     Revolute,
+    /// Turns about its axis without position limits.
     Continuous,
+    /// Slides along its axis between limits (m).
     Prismatic,
+    /// No degree of freedom.
     Fixed,
 }
 
@@ -96,6 +119,7 @@ impl JointKind {
         !matches!(self, JointKind::Fixed)
     }
 
+    /// The URDF `type` attribute of the joint kind, e.g. `revolute`.
     pub fn as_str(self) -> &'static str {
         match self {
             JointKind::Revolute => "revolute",
@@ -109,9 +133,13 @@ impl JointKind {
 /// Position, effort and velocity limits of a joint (rad or m; N·m or N; rad/s or m/s).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct JointLimits {
+    /// Lowest position (rad or m); −∞ for a continuous joint.
     pub lower: f64,
+    /// Highest position (rad or m), not below `lower`; +∞ for a continuous joint.
     pub upper: f64,
+    /// Largest torque or force (N·m or N), positive.
     pub effort: f64,
+    /// Largest speed (rad/s or m/s), positive.
     pub velocity: f64,
 }
 
@@ -120,25 +148,35 @@ pub struct JointLimits {
 pub struct Mimic {
     /// Index into [`RobotModel::joints`].
     pub joint: usize,
+    /// Factor on the followed joint's position.
     pub multiplier: f64,
+    /// Offset added (rad or m).
     pub offset: f64,
 }
 
 /// A joint between two links, with indices into [`RobotModel::links`].
 #[derive(Clone, Debug)]
 pub struct Joint {
+    /// Name, unique in the model.
     pub name: String,
+    /// Joint type.
     pub kind: JointKind,
+    /// Index of the parent link.
     pub parent: usize,
+    /// Index of the child link.
     pub child: usize,
+    /// Pose of the joint frame in the parent link's frame.
     pub origin: Origin,
     /// Unit axis in the joint frame.
     pub axis: [f64; 3],
-    /// `None` for fixed and continuous joints.
+    /// `None` for fixed joints, and for continuous joints whose URDF gives no positive effort
+    /// and velocity limits.
     pub limits: Option<JointLimits>,
     /// Viscous damping (N·m·s/rad) and Coulomb friction (N·m) from `<dynamics>`.
     pub damping: f64,
+    /// Coulomb friction (N·m, or N for a prismatic joint), not negative.
     pub friction: f64,
+    /// The joint this one follows, if it mimics one.
     pub mimic: Option<Mimic>,
 }
 
@@ -152,9 +190,11 @@ pub struct LoadOptions {
 /// A validated robot: links and joints forming one tree.
 #[derive(Clone, Debug)]
 pub struct RobotModel {
+    /// The URDF `<robot name>`.
     pub name: String,
     /// Where the description came from, used in messages.
     pub source_name: String,
+    /// Every link; joints refer to them by index.
     pub links: Vec<Link>,
     /// Sorted so that every joint comes after the joint of its parent link.
     pub joints: Vec<Joint>,

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 /// `meshes/` side by side inside the package.
 #[derive(Clone, Debug, Default)]
 pub struct PackagePaths {
+    /// The directories, searched in order.
     pub roots: Vec<PathBuf>,
 }
 

@@ -6,7 +6,7 @@
 //! `<mimic>` becomes a rapier DOF coupling (this is how the two gripper fingers move as one).
 //!
 //! With [`JointDrive::Kinematic`] the arm's links are kinematic bodies that follow their joint
-//! targets through a ramp instead (see [`kinematic`]), and only the gripper stays dynamic.
+//! targets through a ramp instead (see `robot/kinematic.rs`), and only the gripper stays dynamic.
 
 mod kinematic;
 
@@ -23,8 +23,11 @@ use std::collections::HashMap;
 /// are governed by the multibody's own switch, not by groups.
 pub mod groups {
     use rapier3d::prelude::Group;
+    /// The robot's links; they meet the table and objects.
     pub const ROBOT: Group = Group::GROUP_1;
+    /// The table and the bins; they meet the robot and objects.
     pub const TABLE: Group = Group::GROUP_2;
+    /// The objects to grasp; they meet everything.
     pub const OBJECT: Group = Group::GROUP_3;
 }
 
@@ -35,6 +38,7 @@ pub struct RobotBuildOptions {
     pub base_pose: Isometry3<f64>,
     /// Contacts between non-adjacent links of the robot (adjacent links never collide).
     pub self_collision: bool,
+    /// How mesh collision shapes become convex shapes.
     pub mesh_collision: MeshCollision,
     /// Friction of robot colliders unless overridden per link.
     pub friction: f32,
@@ -43,12 +47,15 @@ pub struct RobotBuildOptions {
     /// Rotor inertia added to every joint (kg·m² or kg): real geared joints have a large one,
     /// and it keeps stiff PD motors on light links stable.
     pub armature: f32,
+    /// How the joints are simulated.
     pub drive: JointDrive,
 }
 
 /// The joint sets of the world a robot is built into.
 pub struct JointSets<'a> {
+    /// The world's multibody joints, where the PD drive's joints live.
     pub multibody_joints: &'a mut MultibodyJointSet,
+    /// The world's impulse joints, where the kinematic drive's dynamic joints (the gripper's) live.
     pub impulse_joints: &'a mut ImpulseJointSet,
 }
 
@@ -64,10 +71,15 @@ pub enum JointDrive {
     /// dynamic: impulse joints with PD motors; no kinematic joint may follow one of them.
     /// `lag` (s): the joints follow the ramp's set point through a first-order lag (0: on it).
     Kinematic {
+        /// Speed cap (rad/s or m/s).
         speed: f32,
+        /// Acceleration cap (rad/s² or m/s²).
         acc: f32,
+        /// Time constant of the lag behind the ramp's set point (s); 0 for none.
         lag: f32,
+        /// Physics step (s).
         dt: f32,
+        /// Names of the joints that stay dynamic.
         dynamic_joints: Vec<String>,
     },
 }
@@ -90,14 +102,18 @@ impl Default for RobotBuildOptions {
 /// limit (N·m/rad and N·m·s/rad, or N/m and N·s/m for prismatic joints).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PdGains {
+    /// Stiffness (N·m/rad or N/m).
     pub kp: f32,
+    /// Damping (N·m·s/rad or N·s/m).
     pub kd: f32,
 }
 
 /// A movable joint of the built robot.
 #[derive(Clone, Debug)]
 pub struct RobotJoint {
+    /// The URDF joint name.
     pub name: String,
+    /// Revolute, continuous or prismatic.
     pub kind: JointKind,
     /// Index into the model's joints.
     pub model_index: usize,
@@ -105,7 +121,10 @@ pub struct RobotJoint {
     link_id: usize,
     /// `(lower, upper)` position limits; infinite for continuous joints.
     pub limits: (f32, f32),
+    /// Largest motor torque or force (N·m or N): the URDF effort limit, unless changed by
+    /// [`Robot::set_effort_limit`]; `f32::MAX` without one.
     pub effort: f32,
+    /// URDF velocity limit (rad/s or m/s); `f32::MAX` without one.
     pub velocity: f32,
     /// Mimicked joint (index into [`Robot::joints`]) with multiplier and offset.
     pub mimic: Option<(usize, f32, f32)>,
@@ -150,6 +169,7 @@ enum DriveMode {
 /// The robot inside a physics world: handles, joint table and motor settings.
 #[derive(Clone, Debug)]
 pub struct Robot {
+    /// The model the robot was built from.
     pub model: RobotModel,
     /// The multibody of the PD drive; `None` under the kinematic drive.
     multibody: Option<MultibodyIndex>,

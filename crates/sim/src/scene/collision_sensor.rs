@@ -20,6 +20,7 @@ impl CollisionSensor {
     /// Physics steps the force is averaged over (one step's solver impulse alone can spike).
     pub const WINDOW: usize = 4;
 
+    /// A sensor that has read no step yet.
     pub fn new() -> Self {
         Self::default()
     }

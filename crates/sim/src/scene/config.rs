@@ -23,6 +23,7 @@ pub struct PhysicsConfig {
     /// Contact stiffness as a natural frequency (Hz). rapier's default (30 Hz) lets a hard-squeezed
     /// light cube sink centimetres into the pads; 300 Hz keeps penetration under a millimetre.
     pub contact_frequency: f32,
+    /// Gravitational acceleration (m/s²), pointing down world z.
     pub gravity: f32,
 }
 
@@ -53,6 +54,7 @@ pub struct TableConfig {
     pub size: [f32; 2],
     /// Centre of the table top in the world x, y (m).
     pub center: [f32; 2],
+    /// Friction coefficient of the table top, also used by the bins (positive).
     pub friction: f32,
 }
 
@@ -74,20 +76,27 @@ impl Default for TableConfig {
 pub enum ObjectShape {
     /// Edge lengths along x, y, z (m).
     Box {
+        /// Edge lengths along x, y, z (m), positive.
         size: [f32; 3],
     },
     /// Upright: the axis along z (m).
     Cylinder {
+        /// Radius (m), positive.
         radius: f32,
+        /// Height along z (m), positive.
         height: f32,
     },
+    /// A ball.
     Sphere {
+        /// Radius (m), positive.
         radius: f32,
     },
     /// An STL or OBJ file scaled by `scale` (file units → m). The collider is the convex hull of
     /// the scaled vertices, centred on the middle of their bounding box.
     Mesh {
+        /// The mesh file; a relative path is taken from the working directory.
         path: PathBuf,
+        /// Factor from file units to metres, positive.
         scale: f32,
     },
 }
@@ -98,10 +107,12 @@ pub enum ObjectShape {
 pub struct ObjectConfig {
     /// Unique among objects and bins; also the name [`super::Scene::in_contact`] knows it by.
     pub name: String,
+    /// Shape and size.
     pub shape: ObjectShape,
     /// Mass (kg).
     #[serde(default = "default_object_mass")]
     pub mass: f32,
+    /// Friction coefficient (positive).
     #[serde(default = "default_object_friction")]
     pub friction: f32,
     /// Linear RGB in 0..1, for renderers.
@@ -198,7 +209,9 @@ pub struct GripperConfig {
     pub force_limit: f32,
     /// Friction coefficient of the finger pads.
     pub pad_friction: f32,
+    /// Stiffness of the finger drive (N/m), positive.
     pub kp: f32,
+    /// Damping of the finger drive (N·s/m), not negative.
     pub kd: f32,
 }
 
@@ -217,7 +230,9 @@ impl Default for GripperConfig {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MountConfig {
+    /// Translation (m).
     pub xyz: [f32; 3],
+    /// Roll, pitch, yaw about the fixed x, y, z axes (rad).
     pub rpy: [f32; 3],
 }
 
@@ -245,10 +260,13 @@ pub struct ArmConfig {
     pub home: Vec<f32>,
     /// PD gains of the arm joints (N·m/rad, N·m·s/rad).
     pub kp: f32,
+    /// Damping gain of the arm joints (N·m·s/rad), not negative.
     pub kd: f32,
     /// Rotor inertia added to every joint (kg·m²).
     pub armature: f32,
+    /// Contacts between non-adjacent links of the arm and gripper.
     pub self_collision: bool,
+    /// How mesh collision shapes of the URDF become convex shapes.
     pub mesh_collision: MeshCollision,
     /// How the arm's joints are simulated: `"pd"`, torque-level PD motors (`kp`, `kd`,
     /// `armature`), or `"kinematic"`, joints that follow their targets within the speed and
@@ -272,8 +290,10 @@ pub struct ArmConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ArmDrive {
+    /// Torque-level PD motors.
     #[default]
     Pd,
+    /// Joints follow their targets through the speed and acceleration caps.
     Kinematic,
 }
 
@@ -312,14 +332,19 @@ impl Default for ArmConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneConfig {
+    /// Time step, solver and gravity.
     pub physics: PhysicsConfig,
+    /// The table the arm stands on.
     pub table: TableConfig,
     /// 1 to [`MAX_OBJECTS`] objects; tasks decide which are placed in an episode.
     pub objects: Vec<ObjectConfig>,
     /// Open boxes on the table (none by default).
     pub bins: Vec<BinConfig>,
+    /// Where objects are placed at reset.
     pub placement: PlacementConfig,
+    /// The gripper's drive and pads.
     pub gripper: GripperConfig,
+    /// The arm, its mount and its drives.
     pub arm: ArmConfig,
 }
 

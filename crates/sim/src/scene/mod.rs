@@ -103,8 +103,11 @@ impl Default for PhysicalParams {
 /// The pose and velocity of a rigid object.
 #[derive(Clone, Copy, Debug)]
 pub struct ObjectState {
+    /// Pose of the object's body in the world frame (m, unit quaternion).
     pub pose: Isometry3<f64>,
+    /// Linear velocity of its centre of mass in the world frame (m/s).
     pub linvel: [f64; 3],
+    /// Angular velocity in the world frame (rad/s).
     pub angvel: [f64; 3],
 }
 
@@ -381,10 +384,13 @@ impl Scene {
         Ok(())
     }
 
+    /// The settings the scene was built from; the object settings and bin centres in force this
+    /// episode are [`Self::object_config`] and [`Self::bins`].
     pub fn config(&self) -> &SceneConfig {
         &self.config
     }
 
+    /// The arm and gripper as built into the world: joint table, bodies, model.
     pub fn robot(&self) -> &Robot {
         &self.robot
     }

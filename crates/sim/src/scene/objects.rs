@@ -41,8 +41,11 @@ pub(super) type MeshCache = HashMap<(PathBuf, u32), ObjectGeometry>;
 /// and `config.bins`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ShapeOwner {
+    /// The table top.
     Table,
+    /// An object, by its index in `config.objects`.
     Object(usize),
+    /// A bin's floor or wall, by the bin's index in `config.bins`.
     Bin(usize),
 }
 
@@ -54,6 +57,7 @@ pub struct RobotContact {
     pub link: String,
     /// The body is a finger (its pads are what grasps).
     pub finger: bool,
+    /// What the body touched.
     pub other: ShapeOwner,
     /// The force the other body exerted on the robot (N, world frame): the contact's normal
     /// impulses over the step.
@@ -63,8 +67,11 @@ pub struct RobotContact {
 /// A collider shape at its world pose.
 #[derive(Clone)]
 pub struct PlacedShape {
+    /// What the shape belongs to.
     pub owner: ShapeOwner,
+    /// The collider's shape.
     pub shape: SharedShape,
+    /// The collider's pose in the world frame.
     pub pose: Pose,
 }
 
@@ -285,6 +292,7 @@ impl Scene {
         self.objects.len()
     }
 
+    /// The name object `i` is known by (its `name` setting).
     pub fn object_name(&self, i: usize) -> &str {
         &self.object_config(i).name
     }
