@@ -23,8 +23,9 @@ pub struct CameraConfig {
     pub up: [f32; 3],
     /// Vertical field of view (degrees), in (0, 170].
     pub fov_deg: f32,
-    /// Image size (pixels), 1 to [`MAX_SIDE`].
+    /// Image width (pixels), 1 to [`MAX_SIDE`].
     pub width: u32,
+    /// Image height (pixels), 1 to [`MAX_SIDE`].
     pub height: u32,
     /// Nothing nearer than this is drawn (m).
     pub near: f32,
@@ -154,22 +155,27 @@ impl Camera {
         })
     }
 
+    /// The settings it was built from.
     pub fn config(&self) -> &CameraConfig {
         &self.config
     }
 
+    /// Image width (pixels).
     pub fn width(&self) -> u32 {
         self.config.width
     }
 
+    /// Image height (pixels).
     pub fn height(&self) -> u32 {
         self.config.height
     }
 
+    /// Near clipping distance along the optical axis (m).
     pub fn near(&self) -> f32 {
         self.config.near
     }
 
+    /// Far clipping distance along the optical axis (m): the depth the background reads.
     pub fn far(&self) -> f32 {
         self.config.far
     }

@@ -8,7 +8,9 @@ pub enum RenderError {
     /// A camera setting is out of range; `field` names it (`fov_deg`, `width`, …).
     #[error("camera {field}: {problem}")]
     Camera {
+        /// The setting's name.
         field: &'static str,
+        /// Why its value is refused.
         problem: String,
     },
     /// The scene has more parts than the segmentation ids have room for.
@@ -17,8 +19,14 @@ pub enum RenderError {
     /// A video could not be encoded.
     #[error("video: {0}")]
     Video(String),
+    /// An image file could not be written.
     #[error("cannot write {path}: {problem}")]
-    Write { path: PathBuf, problem: String },
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why: the I/O or encoder error, or image data of the wrong size.
+        problem: String,
+    },
 }
 
 impl RenderError {
@@ -30,4 +38,5 @@ impl RenderError {
     }
 }
 
+/// Result alias for the renderer.
 pub type Result<T, E = RenderError> = std::result::Result<T, E>;

@@ -21,6 +21,8 @@
 //! # let _ = (rgb, depth, ids); Ok(()) }
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod camera;
 pub mod error;
 pub mod image;

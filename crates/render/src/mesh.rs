@@ -13,7 +13,9 @@ const BANDS: u32 = 12;
 /// Triangles in a shape's own frame (m).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
+    /// Vertex positions.
     pub vertices: Vec<Vector>,
+    /// Vertex indices of each triangle, counter-clockwise seen from outside when [`Self::closed`].
     pub triangles: Vec<[u32; 3]>,
     /// A closed surface wound counter-clockwise seen from outside: faces turned away from the
     /// camera are hidden and can be skipped. Open or inconsistent meshes are drawn two-sided.
@@ -78,6 +80,7 @@ impl Mesh {
         self
     }
 
+    /// Whether the mesh has no triangle to draw.
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
     }

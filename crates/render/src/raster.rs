@@ -69,12 +69,15 @@ pub struct Raster {
     pub rgb: Vec<u8>,
     /// 1 / depth; 0 where nothing was drawn. Larger is nearer.
     pub inv_depth: Vec<f32>,
+    /// Segmentation id per pixel (see [`crate::segment`]), rows top to bottom;
+    /// [`crate::segment::BACKGROUND`] where nothing was drawn.
     pub segmentation: Vec<u16>,
     /// Camera-frame vertices of the mesh being drawn.
     scratch: Vec<Vector>,
 }
 
 impl Raster {
+    /// Buffers for a `width × height` image, all pixels black, background id, no depth.
     pub fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize;
         Self {

@@ -37,6 +37,7 @@ impl Renderer {
         Self::new(scene, Camera::new(config)?)
     }
 
+    /// The camera it draws from.
     pub fn camera(&self) -> &Camera {
         &self.camera
     }
@@ -73,10 +74,12 @@ impl Renderer {
         Ok(())
     }
 
+    /// Image width (pixels).
     pub fn width(&self) -> u32 {
         self.camera.width()
     }
 
+    /// Image height (pixels).
     pub fn height(&self) -> u32 {
         self.camera.height()
     }

@@ -35,9 +35,13 @@ struct RobotPart {
 
 /// A mesh placed in the world, ready to draw.
 pub struct Placed<'a> {
+    /// The triangles, in the mesh's own frame.
     pub mesh: &'a Mesh,
+    /// Pose of the mesh's frame in the world.
     pub pose: Pose,
+    /// Linear RGB in 0..1.
     pub colour: [f32; 3],
+    /// Segmentation id (see [`crate::segment`]).
     pub id: u16,
 }
 

@@ -11,22 +11,31 @@
 //!
 //! Links without a shape (`tool0`, `tcp`) never appear. With the bundled FR5 and gripper:
 //! 64–70 `base_link`…`wrist3_link`, 72 `gripper_base`, 73/74 the left/right finger.
-//! [`crate::Renderer::segment_name`] names an id.
+//! [`crate::segment_name`] names an id.
 
 use crate::error::{RenderError, Result};
 
+/// Id of pixels that show nothing.
 pub const BACKGROUND: u16 = 0;
+/// Id of the table.
 pub const TABLE: u16 = 1;
+/// Id of bin 0; bin `j` is `FIRST_BIN + j`.
 pub const FIRST_BIN: u16 = 2;
+/// Id of object 0; object `i` is `FIRST_OBJECT + i`.
 pub const FIRST_OBJECT: u16 = 32;
+/// Id of robot link 0; link `l` is `FIRST_LINK + l`.
 pub const FIRST_LINK: u16 = 64;
 
 /// A part of the scene as the segmentation image tells it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Segment {
+    /// Nothing hit.
     Background,
+    /// The table.
     Table,
+    /// A bin, by its index in the scene's bins.
     Bin(usize),
+    /// An object, by its index in the scene's objects.
     Object(usize),
     /// Index into the robot model's links.
     Link(usize),
