@@ -14,7 +14,7 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     via_temporary(path, bytes, |tmp, path| std::fs::rename(tmp, path))
 }
 
-/// As [`write`], but never replaces a file: the complete temporary file is hard-linked to
+/// As [`write()`], but never replaces a file: the complete temporary file is hard-linked to
 /// `path`, which fails with [`std::io::ErrorKind::AlreadyExists`] if anything is there by then
 /// (no window between a check and the write).
 pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {

@@ -13,7 +13,10 @@ use serde::Serialize;
 /// user's settings, and a label that lists them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CheckVariant {
+    /// The overrides joined by spaces, or `defaults` when there are none.
     pub label: String,
+    /// `key=value` settings, values as a config file spells them
+    /// (e.g. `control.action_mode="joint"`).
     pub overrides: Vec<String>,
 }
 
@@ -62,11 +65,14 @@ fn spelled<T: Serialize>(value: &T) -> String {
     toml::Value::try_from(value).map_or_else(|e| e.to_string(), |v| v.to_string())
 }
 
-/// How one episode of the random rollout ended.
+/// How the episodes of the random rollout ended, counted by reason.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct EndReasons {
+    /// Episodes that ended in success.
     pub success: u32,
+    /// Episodes truncated at the step limit.
     pub time_limit: u32,
+    /// Episodes that ended with the object off the table.
     pub object_off_table: u32,
     /// Anything else (non-finite physics, or a terminal step with no known reason): a failure.
     pub other: u32,
@@ -77,13 +83,18 @@ pub struct EndReasons {
 pub struct CheckReport {
     /// Each check by name, with the problem when it failed.
     pub checks: Vec<(String, Result<(), String>)>,
+    /// Steps the random rollout took (fewer than asked when it failed).
     pub rollout_steps: u64,
+    /// How the rollout's episodes ended.
     pub episodes: EndReasons,
+    /// Rollout steps whose observation held a non-finite value.
     pub nan_observations: u64,
+    /// Rollout steps whose reward was not finite.
     pub non_finite_rewards: u64,
 }
 
 impl CheckReport {
+    /// Whether every check passed.
     pub fn passed(&self) -> bool {
         self.checks.iter().all(|(_, r)| r.is_ok())
     }

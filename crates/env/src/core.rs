@@ -23,25 +23,35 @@ pub enum RenderMode {
 /// What [`Env::render`] returns.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Frame {
+    /// The text of [`RenderMode::Ansi`].
     Text(String),
     /// `height × width × 3` bytes of sRGB, rows top to bottom.
     Rgb {
+        /// Image width (pixels).
         width: u32,
+        /// Image height (pixels).
         height: u32,
+        /// The pixels, row-major.
         data: Vec<u8>,
     },
     /// `height × width` distances along the camera's optical axis (m); the camera's `far` where
     /// nothing is in view.
     Depth {
+        /// Image width (pixels).
         width: u32,
+        /// Image height (pixels).
         height: u32,
+        /// The depths, row-major, top row first.
         data: Vec<f32>,
     },
     /// `height × width` ids of what each pixel shows: 0 background, 1 table, 2 + j bin j,
     /// 32 + i object i, 64 + l robot link l (docs/rendering.md).
     Segmentation {
+        /// Image width (pixels).
         width: u32,
+        /// Image height (pixels).
         height: u32,
+        /// The ids, row-major, top row first.
         data: Vec<u16>,
     },
 }
@@ -74,6 +84,7 @@ pub enum EpisodeEvent {
 pub struct NamedValues(Vec<(Cow<'static, str>, f32)>);
 
 impl NamedValues {
+    /// No values.
     pub fn new() -> Self {
         Self(Vec::new())
     }
@@ -93,22 +104,27 @@ impl NamedValues {
         self
     }
 
+    /// The value of `name`, if set.
     pub fn get(&self, name: &str) -> Option<f32> {
         self.0.iter().find(|(n, _)| n == name).map(|(_, v)| *v)
     }
 
+    /// The names and values, in insertion order.
     pub fn iter(&self) -> impl ExactSizeIterator<Item = (&str, f32)> {
         self.0.iter().map(|(n, v)| (n.as_ref(), *v))
     }
 
+    /// The names, in insertion order.
     pub fn names(&self) -> impl ExactSizeIterator<Item = &str> {
         self.0.iter().map(|(n, _)| n.as_ref())
     }
 
+    /// Number of names.
     pub fn len(&self) -> usize {
         self.0.len()
     }
 
+    /// Whether no name is set.
     pub fn is_empty(&self) -> bool {
         self.0.is_empty()
     }
@@ -128,6 +144,7 @@ impl NamedValues {
         }
     }
 
+    /// Removes every name.
     pub fn clear(&mut self) {
         self.0.clear();
     }
@@ -192,19 +209,24 @@ pub struct Info {
 /// The result of [`Env::step`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Step {
+    /// The observation after the action.
     pub obs: Vec<f32>,
+    /// The reward for the transition.
     pub reward: f32,
     /// The episode reached a terminal state of the task (success, object off the table).
     pub terminated: bool,
     /// The episode was cut for a reason outside the task (time limit, non-finite physics).
     pub truncated: bool,
+    /// Everything else the step reports.
     pub info: Info,
 }
 
 /// Metadata of an environment, like Gymnasium's `metadata` dict.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Metadata {
+    /// The registry id, e.g. `FaArmGrasp-v0`.
     pub id: &'static str,
+    /// The render modes the environment supports.
     pub render_modes: Vec<RenderMode>,
     /// Control steps per second.
     pub render_fps: f32,
@@ -212,9 +234,13 @@ pub struct Metadata {
 
 /// A reinforcement-learning environment with continuous (Box) observation and action spaces.
 pub trait Env: Send {
+    /// Id, render modes and frame rate.
     fn metadata(&self) -> Metadata;
+    /// The space every observation lies in.
     fn observation_space(&self) -> &BoxSpace;
+    /// The actions [`Env::step`] takes (others are clipped into it).
     fn action_space(&self) -> &BoxSpace;
+    /// The render mode chosen when the environment was made; `None` when it does not render.
     fn render_mode(&self) -> Option<RenderMode>;
 
     /// Starts an episode. `Some(seed)` re-seeds the environment's random stream (the same seed

@@ -2,6 +2,7 @@
 
 use fairgrasp_sim::SimError;
 
+/// What can go wrong while configuring, building, stepping or saving an environment.
 #[derive(Debug, thiserror::Error)]
 pub enum EnvError {
     /// An action that cannot be applied (wrong length, NaN, infinite).
@@ -9,18 +10,32 @@ pub enum EnvError {
     Action(String),
     /// A setting that is unknown or out of range; names the key.
     #[error("invalid setting `{key}`: {problem}")]
-    Config { key: String, problem: String },
+    Config {
+        /// The setting's key, e.g. `control.action_mode`.
+        key: String,
+        /// Why it is refused.
+        problem: String,
+    },
     /// The environment was used out of order (e.g. `step` before `reset`).
     #[error("{0}")]
     Usage(String),
+    /// The simulation failed (a bad model or scene setting, a non-finite state, …).
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// Rendering failed; bad camera settings become [`EnvError::Config`] instead.
     #[error("rendering: {0}")]
     Render(fairgrasp_render::RenderError),
+    /// A file (a config, saved statistics) could not be read, parsed or written.
     #[error("{path}: {problem}")]
-    File { path: String, problem: String },
+    File {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        problem: String,
+    },
 }
 
+/// Result alias for the environment layer.
 pub type Result<T, E = EnvError> = std::result::Result<T, E>;
 
 impl From<fairgrasp_render::RenderError> for EnvError {

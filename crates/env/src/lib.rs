@@ -16,6 +16,8 @@
 //!   Gymnasium and Stable-Baselines3;
 //! - [`running_stats`]: [`RunningMeanStd`], SB3's running mean and variance.
 
+#![warn(missing_docs)]
+
 pub mod arm;
 pub mod atomic;
 pub mod check;

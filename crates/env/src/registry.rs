@@ -18,6 +18,7 @@ use crate::tasks::{grasp::Grasp, pick_place::PickPlace, sort::Sort};
 
 /// One registered environment.
 pub struct EnvSpec {
+    /// The id [`make`] knows it by, e.g. `FaArmGrasp-v0`.
     pub id: &'static str,
     /// One line on what the env is.
     pub summary: &'static str,

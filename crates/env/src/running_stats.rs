@@ -61,6 +61,7 @@ impl RunningMeanStd {
         self.mean.len()
     }
 
+    /// Mean of each component.
     pub fn mean(&self) -> &[f64] {
         &self.mean
     }

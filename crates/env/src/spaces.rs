@@ -6,8 +6,11 @@ use serde::{Deserialize, Serialize};
 /// A box `[low, high]` of f32 values with a shape (flattened row-major).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BoxSpace {
+    /// Lower bound of each value (may be −∞).
     pub low: Vec<f32>,
+    /// Upper bound of each value (may be +∞).
     pub high: Vec<f32>,
+    /// The shape the flattened values take: `[dim]` for a box from [`BoxSpace::new`].
     pub shape: Vec<usize>,
 }
 

@@ -24,6 +24,7 @@ pub trait TaskSettings:
 
     /// Control steps before the episode is truncated.
     fn max_episode_steps(&self) -> u32;
+    /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     fn render_mode(&self) -> Option<RenderMode>;
     /// Checks ranges; errors name the key (`task.…`).
     fn validate(&self) -> Result<()>;
@@ -82,6 +83,7 @@ pub struct RandomizationConfig {
     pub enabled: bool,
     /// kg, every object.
     pub object_mass: [f32; 2],
+    /// Friction coefficient of every object, within [0, 5].
     pub object_friction: [f32; 2],
     /// Factor on every dimension of each object's shape (a 5 cm cube with [0.9, 1.1] has
     /// edges of 4.5–5.5 cm).
@@ -102,6 +104,7 @@ pub struct RandomizationConfig {
     /// Actions reach the robot `min_latency_steps…max_latency_steps` control steps late (drawn
     /// per episode).
     pub min_latency_steps: u32,
+    /// Largest action latency (control steps), at most 10.
     pub max_latency_steps: u32,
     /// Uniform offset added to each home joint angle (± rad).
     pub initial_joint_jitter: f32,
@@ -109,6 +112,7 @@ pub struct RandomizationConfig {
     /// report `q + e` and the controller servoes the reported angles to its targets. See
     /// [`crate::arm::ArmEnv`] for what the model includes.
     pub joint_offset: f32,
+    /// Noise added to each observation group every step.
     pub observation_noise: ObservationNoise,
 }
 
@@ -133,6 +137,7 @@ impl Default for RandomizationConfig {
 }
 
 impl RandomizationConfig {
+    /// Checks every range; errors name the key (`randomization.…`).
     pub fn validate(&self) -> Result<()> {
         check_range("randomization.object_mass", self.object_mass, 0.001, 5.0)?;
         check_range(
@@ -208,9 +213,13 @@ impl RandomizationConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ShapeKind {
+    /// A box, each side drawn from `box_side`.
     Box,
+    /// An upright cylinder, radius and height drawn from their ranges.
     Cylinder,
+    /// A ball, radius drawn from `sphere_radius`.
     Sphere,
+    /// A file from `meshes`, scaled by a factor drawn from `mesh_scale`.
     Mesh,
 }
 
@@ -220,12 +229,17 @@ pub enum ShapeKind {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ShapesConfig {
+    /// Master switch; off, objects keep the scene's shapes.
     pub enabled: bool,
+    /// The kinds drawn from, uniformly (at least one).
     pub kinds: Vec<ShapeKind>,
     /// Each side of a box (m).
     pub box_side: [f32; 2],
+    /// Cylinder radius range (m), within [0.005, 0.0425].
     pub cylinder_radius: [f32; 2],
+    /// Cylinder height range (m), within [0.01, 0.2].
     pub cylinder_height: [f32; 2],
+    /// Sphere radius range (m), within [0.005, 0.0425].
     pub sphere_radius: [f32; 2],
     /// STL or OBJ files drawn from for the `mesh` kind.
     pub meshes: Vec<PathBuf>,
@@ -249,6 +263,7 @@ impl Default for ShapesConfig {
 }
 
 impl ShapesConfig {
+    /// Checks the ranges when enabled; errors name the key (`shapes.…`).
     pub fn validate(&self) -> Result<()> {
         if !self.enabled {
             return Ok(());
@@ -286,11 +301,17 @@ impl ShapesConfig {
     bound = "T: TaskSettings, R: RewardSettings"
 )]
 pub struct ArmEnvConfig<T, R> {
+    /// The `[scene]` section: physics, table, objects, bins, arm and gripper.
     pub scene: SceneConfig,
+    /// The `[control]` section: action mapping, limits and the controller model.
     pub control: ControlConfig,
+    /// The task's `[task]` section.
     pub task: T,
+    /// The task's `[reward]` section.
     pub reward: R,
+    /// The `[randomization]` section: domain randomisation.
     pub randomization: RandomizationConfig,
+    /// The `[shapes]` section: random object shapes.
     pub shapes: ShapesConfig,
     /// The camera of the `rgb_array` and `depth_array` render modes (unused otherwise).
     pub render: CameraConfig,

@@ -31,6 +31,7 @@ pub enum ActionMode {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControlConfig {
+    /// What an action commands: joint deltas or TCP deltas.
     pub action_mode: ActionMode,
     /// Largest joint-angle change per control step (rad). The design used 0.1 and recommends
     /// 0.05 for smoother motion.
@@ -44,6 +45,7 @@ pub struct ControlConfig {
     pub lead_steps: f32,
     /// Cartesian mode: the commanded TCP stays in this box, arm base frame (m).
     pub workspace_min: [f32; 3],
+    /// Cartesian mode: the upper corner of that box, above `workspace_min` on every axis (m).
     pub workspace_max: [f32; 3],
     /// The deployment's motion model: joint targets reach the drives through speed- and
     /// acceleration-capped set points every servo period ([`crate::arm::servo`]).
@@ -109,6 +111,7 @@ impl Default for ControlConfig {
 }
 
 impl ControlConfig {
+    /// Checks every range; errors name the key (`control.…`).
     pub fn validate(&self) -> Result<()> {
         let positive = |key: &str, v: f32, max: f32| {
             if v.is_finite() && v > 0.0 && v <= max {
@@ -190,6 +193,7 @@ pub struct Command {
     pub arm_target: Vec<f32>,
     /// Cartesian mode: the commanded TCP pose (base frame).
     pub tcp_target: Isometry3<f64>,
+    /// Whether the gripper is commanded open.
     pub gripper_open: bool,
 }
 
@@ -236,10 +240,12 @@ impl ActionMapper {
         })
     }
 
+    /// The control settings it maps by.
     pub fn config(&self) -> &ControlConfig {
         &self.config
     }
 
+    /// Number of arm joints.
     pub fn dof(&self) -> usize {
         self.limits.len()
     }

@@ -48,6 +48,8 @@ impl Default for DrivesConfig {
 }
 
 impl DrivesConfig {
+    /// Checks the settings when enabled (`servo_enabled`: whether `[control.servo]` is on);
+    /// errors name the key (`control.drives.…`).
     pub fn validate(&self, servo_enabled: bool) -> Result<()> {
         if !self.enabled {
             return Ok(());

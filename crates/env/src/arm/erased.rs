@@ -27,6 +27,7 @@ pub trait SuccessJudge: Send {
 /// (the real world does not change between episodes), the configured object mass and friction,
 /// random object shapes when `[shapes]` enables them.
 pub trait ArmWorld: Send {
+    /// The scene, for reading its state.
     fn scene(&self) -> &Scene;
     /// The scene to drive and step between the task's judgements.
     fn scene_mut(&mut self) -> &mut Scene;
@@ -57,6 +58,7 @@ impl<T: Task> ArmWorld for ArmEnv<T> {
 /// A trained model's env as the deployment reads it: built from the model's settings with
 /// randomisation off and never stepped.
 pub trait ArmTaskEnv: Env {
+    /// The env's scene, built from the model's settings with randomisation off.
     fn scene(&self) -> &Scene;
     /// The true state at the last reset.
     fn state(&self) -> Option<&ArmState>;
@@ -64,6 +66,7 @@ pub trait ArmTaskEnv: Env {
     fn mapper(&self) -> &ActionMapper;
     /// How the policy read the arm in training (`[readings]`).
     fn readings(&self) -> &ReadingsConfig;
+    /// Control steps before an episode is truncated, as in training.
     fn max_episode_steps(&self) -> u32;
     /// The observation of a state read outside the simulator ([`ArmEnv::observation_of`]).
     fn observation_of(

@@ -35,6 +35,7 @@ impl Default for GripperConfig {
 }
 
 impl GripperConfig {
+    /// Checks the speed range; errors name the key.
     pub fn validate(&self) -> Result<()> {
         let [lo, hi] = self.speed_percent_per_s;
         if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi && hi <= 1e5) {

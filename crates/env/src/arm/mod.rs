@@ -323,6 +323,7 @@ impl<T: Task> ArmEnv<T> {
         })
     }
 
+    /// The configuration it was built from; the scene as the task adjusted it is [`Self::scene`]'s.
     pub fn config(&self) -> &ArmEnvConfig<T::Settings, T::Reward> {
         &self.config
     }
@@ -333,6 +334,7 @@ impl<T: Task> ArmEnv<T> {
         &self.scene
     }
 
+    /// The task: its settings and per-episode state (goals, bins).
     pub fn task(&self) -> &T {
         &self.task
     }

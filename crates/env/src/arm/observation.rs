@@ -8,13 +8,21 @@ use std::ops::Range;
 /// Which noise standard deviation applies to a range of observation entries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NoiseGroup {
+    /// Joint angles (rad).
     JointPosition,
+    /// Joint speeds (rad/s).
     JointVelocity,
+    /// TCP position (m).
     EePosition,
+    /// TCP orientation (Euler angles or rotation-matrix entries).
     EeOrientation,
+    /// TCP linear velocity (m/s).
     EeVelocity,
+    /// Object position and lengths measured from it: TCP→object, lift, object→goal (m).
     ObjectPosition,
+    /// Object orientation (quaternion or rotation features).
     ObjectOrientation,
+    /// Gripper opening (m).
     Gripper,
     /// Exact or derived quantities (flags, goals, the previous action): no noise of their own.
     None,
@@ -41,6 +49,7 @@ impl NoiseGroup {
         }
     }
 
+    /// The standard deviation of this group's noise under `noise`; 0 for [`NoiseGroup::None`].
     pub fn std(self, noise: &ObservationNoise) -> f32 {
         match self {
             NoiseGroup::JointPosition => noise.joint_position,
@@ -83,6 +92,7 @@ impl<'a> ObsWriter<'a> {
         }
     }
 
+    /// Appends `values`, all in `group`.
     pub fn push(&mut self, group: NoiseGroup, values: &[f32]) {
         let start = self.out.len();
         self.out.extend_from_slice(values);
@@ -94,18 +104,22 @@ impl<'a> ObsWriter<'a> {
         }
     }
 
+    /// Appends one value in `group`.
     pub fn push1(&mut self, group: NoiseGroup, value: f32) {
         self.push(group, &[value]);
     }
 
+    /// Appends a vector's x, y, z as f32, in `group`.
     pub fn push3(&mut self, group: NoiseGroup, v: &Vector3<f64>) {
         self.push(group, &[v.x as f32, v.y as f32, v.z as f32]);
     }
 
+    /// Number of values written so far.
     pub fn len(&self) -> usize {
         self.out.len()
     }
 
+    /// Whether no value is written yet.
     pub fn is_empty(&self) -> bool {
         self.out.is_empty()
     }

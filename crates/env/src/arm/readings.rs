@@ -55,6 +55,7 @@ impl Default for ReadingsConfig {
 }
 
 impl ReadingsConfig {
+    /// Checks the ranges; errors name the key (`readings.…`).
     pub fn validate(&self) -> Result<()> {
         check_non_negative("readings.object_feed_hz", self.object_feed_hz)?;
         check_range("readings.state_age_ms", self.state_age_ms, 0.0, 1000.0)?;
@@ -122,14 +123,18 @@ const WIDTH_TOLERANCE: f32 = 0.003;
 /// by. Taken from the env's nominal (reset, unrandomised) state.
 #[derive(Clone, Debug)]
 pub struct EstimatorFacts {
+    /// The kinematic chain from the arm base to the TCP.
     pub chain: SerialChain,
+    /// Height of the table top (m, base frame z).
     pub table_z: f64,
+    /// Largest distance between the finger pads (m): 100 % of the stroke.
     pub gripper_max_opening: f32,
     /// Object 0 at rest: its half extents and resting height.
     pub object: ObjectReading,
 }
 
 impl EstimatorFacts {
+    /// The facts of the nominal state `nominal` (its object 0), with `chain` for the TCP.
     pub fn new(chain: SerialChain, nominal: &ArmState) -> Self {
         Self {
             chain,
@@ -158,6 +163,7 @@ pub struct StateEstimator {
 }
 
 impl StateEstimator {
+    /// An estimator that has seen no reading yet.
     pub fn new() -> Self {
         Self::default()
     }

@@ -10,6 +10,7 @@ use fairgrasp_sim::scene::Scene;
 /// One object, in the arm base frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ObjectReading {
+    /// Pose of the object's body (m, unit quaternion).
     pub pose: Isometry3<f64>,
     /// Linear velocity (m/s).
     pub linvel: Vector3<f64>,
@@ -41,6 +42,7 @@ pub struct ArmState {
     pub gripper_closing: bool,
     /// Height of the table top (m, base frame z).
     pub table_z: f64,
+    /// Every object of the scene, in scene order.
     pub objects: Vec<ObjectReading>,
 }
 

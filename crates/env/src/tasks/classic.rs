@@ -41,12 +41,14 @@ pub struct Pendulum {
 }
 
 impl Pendulum {
+    /// Control steps per episode; the episode is truncated after them.
     pub const MAX_STEPS: u32 = 200;
     const MAX_SPEED: f32 = 8.0;
     const MAX_TORQUE: f32 = 2.0;
     const DT: f32 = 0.05;
     const G: f32 = 10.0;
 
+    /// A pendulum seeded with 0; call `reset` before stepping.
     pub fn new() -> Self {
         Self {
             theta: 0.0,
@@ -156,9 +158,11 @@ pub struct PointReach {
 }
 
 impl PointReach {
+    /// Control steps per episode; the episode is truncated after them.
     pub const MAX_STEPS: u32 = 50;
     const DT: f32 = 0.1;
 
+    /// A point mass seeded with 0; call `reset` before stepping.
     pub fn new() -> Self {
         Self {
             pos: [0.0; 2],

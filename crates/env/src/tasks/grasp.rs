@@ -44,6 +44,7 @@ pub enum ObservationPreset {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GraspSettings {
+    /// Which observation vector to return.
     pub observation: ObservationPreset,
     /// Control steps before the episode is truncated.
     pub max_episode_steps: u32,
@@ -53,6 +54,7 @@ pub struct GraspSettings {
     pub success_max_offset: f32,
     /// Consecutive control steps the success conditions must hold.
     pub success_hold_steps: u32,
+    /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     pub render_mode: Option<RenderMode>,
 }
 
@@ -93,7 +95,7 @@ pub fn grasp_status(state: &ArmState) -> GraspStatus {
     }
 }
 
-/// The grasp task's success rule over one episode's states: [`GraspSettings::holds`] counted
+/// The grasp task's success rule over one episode's states: [`GraspStatus::satisfies`] counted
 /// over consecutive control steps until `success_hold_steps`.
 #[derive(Clone, Debug)]
 pub struct GraspSuccess(SuccessTracker);
@@ -162,11 +164,13 @@ pub enum RewardKind {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GraspReward {
+    /// Which reward to pay.
     pub kind: RewardKind,
     /// × (previous EE–object distance − current), per step.
     pub approach: f32,
     /// Paid every step the EE is within `near_radius` of the object.
     pub near: f32,
+    /// EE–object distance within which `near` is paid (m), positive.
     pub near_radius: f32,
     /// Paid once per episode, the first time the object is grasped.
     pub grasp: f32,

@@ -17,12 +17,14 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+/// The Gymnasium id of the pick-and-place task.
 pub const ENV_ID: &str = "FaArmPickPlace-v0";
 
 /// The `[task]` section of the pick-and-place task.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PickPlaceSettings {
+    /// Control steps before the episode is truncated.
     pub max_episode_steps: u32,
     /// Goals are drawn up to this height above the object's resting height (m); 0 keeps them
     /// on the table.
@@ -33,6 +35,7 @@ pub struct PickPlaceSettings {
     pub max_object_speed: f32,
     /// Consecutive control steps the success conditions must hold.
     pub success_hold_steps: u32,
+    /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     pub render_mode: Option<RenderMode>,
 }
 
@@ -93,6 +96,7 @@ pub enum PlaceRewardKind {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PickPlaceReward {
+    /// Which reward to pay.
     pub kind: PlaceRewardKind,
     /// Paid on success.
     pub success: f32,
@@ -113,7 +117,9 @@ impl RewardSettings for PickPlaceReward {
     }
 }
 
+/// The pick-and-place task's whole configuration.
 pub type PickPlaceConfig = ArmEnvConfig<PickPlaceSettings, PickPlaceReward>;
+/// The pick-and-place environment.
 pub type PickPlaceEnv = ArmEnv<PickPlace>;
 
 /// Counts consecutive control steps that satisfy a condition.

@@ -20,6 +20,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+/// The Gymnasium id of the sorting task.
 pub const ENV_ID: &str = "FaArmSort-v0";
 
 /// Slot offsets inside a bin, in units of `slot_spacing`.
@@ -65,9 +66,11 @@ pub struct SortSettings {
     pub num_objects: usize,
     /// 2–3 bins.
     pub num_bins: usize,
+    /// Control steps before the episode is truncated.
     pub max_episode_steps: u32,
-    /// Where the objects are placed (arm base frame x, y centre and extent, m).
+    /// Centre of the area the objects are placed in (arm base frame x, y; m).
     pub object_area_center: [f32; 2],
+    /// Extent of that area along x and y (m).
     pub object_area_size: [f32; 2],
     /// Bin centres (arm base frame x, y, m), the first `num_bins` used.
     pub bin_centers: Vec<[f32; 2]>,
@@ -75,6 +78,7 @@ pub struct SortSettings {
     pub bin_inner_size: [f32; 2],
     /// An object counts as resting when slower than this (m/s).
     pub max_object_speed: f32,
+    /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     pub render_mode: Option<RenderMode>,
 }
 
@@ -160,7 +164,9 @@ impl RewardSettings for SortReward {
     }
 }
 
+/// The sorting task's whole configuration.
 pub type SortConfig = ArmEnvConfig<SortSettings, SortReward>;
+/// The sorting environment.
 pub type SortEnv = ArmEnv<Sort>;
 
 /// The sorting task.

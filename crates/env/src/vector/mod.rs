@@ -66,6 +66,7 @@ pub struct VecStep<'a> {
 }
 
 impl<'a> VecStep<'a> {
+    /// Number of environments stepped.
     pub fn num_envs(&self) -> usize {
         self.rewards.len()
     }

@@ -118,14 +118,17 @@ impl<E: Env> RecordEpisodeStatistics<E> {
         self.current.length
     }
 
+    /// The wrapped environment.
     pub fn inner(&self) -> &E {
         &self.env
     }
 
+    /// The wrapped environment, mutably; steps taken on it directly are not counted.
     pub fn inner_mut(&mut self) -> &mut E {
         &mut self.env
     }
 
+    /// The wrapped environment, dropping the statistics.
     pub fn into_inner(self) -> E {
         self.env
     }

@@ -104,14 +104,17 @@ impl<E: Env> RescaleAction<E> {
             .collect())
     }
 
+    /// The wrapped environment.
     pub fn inner(&self) -> &E {
         &self.env
     }
 
+    /// The wrapped environment, mutably; it takes actions in its own, unscaled space.
     pub fn inner_mut(&mut self) -> &mut E {
         &mut self.env
     }
 
+    /// The wrapped environment, unwrapped.
     pub fn into_inner(self) -> E {
         self.env
     }

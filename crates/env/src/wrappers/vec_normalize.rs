@@ -88,6 +88,7 @@ impl VecNormalizeConfig {
 /// written as decimal strings that read back bit-exactly (see [`RunningMeanStd`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct VecNormalizeState {
+    /// What is normalised, the clip bounds, the discount and epsilon.
     pub config: VecNormalizeConfig,
     /// Statistics of the observations (`obs_dim` components).
     pub obs_rms: RunningMeanStd,
@@ -364,10 +365,12 @@ impl<V: VectorEnv> VecNormalize<V> {
         Ok(())
     }
 
+    /// Running statistics of the observations.
     pub fn obs_rms(&self) -> &RunningMeanStd {
         &self.state.obs_rms
     }
 
+    /// Running statistics of the discounted return.
     pub fn ret_rms(&self) -> &RunningMeanStd {
         &self.state.ret_rms
     }
@@ -408,6 +411,7 @@ impl<V: VectorEnv> VecNormalize<V> {
         self.raw_terminal.get(i)?.as_deref()
     }
 
+    /// The wrapped vector environment.
     pub fn venv(&self) -> &V {
         &self.venv
     }
@@ -418,6 +422,7 @@ impl<V: VectorEnv> VecNormalize<V> {
         &mut self.venv
     }
 
+    /// The wrapped vector environment, dropping the statistics.
     pub fn into_inner(self) -> V {
         self.venv
     }
