@@ -25,7 +25,7 @@ use fairgrasp_env::arm::{
 use fairgrasp_env::sim::pick::SuccessRule;
 use fairgrasp_env::sim::rapier3d::na::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use fairgrasp_env::{Env as _, GraspConfig, GraspEnv};
-use fairgrasp_rl::policies::Policy as NativePolicy;
+use fairgrasp_rl::Policy as NativePolicy;
 use numpy::{PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -626,7 +626,7 @@ impl PolicyDriver {
         self.read(|d| {
             format!(
                 "PolicyDriver({} on {}, {} set points per {:.4} s step)",
-                d.policy.meta().algo,
+                d.policy.meta().algo.algo(),
                 d.env_id,
                 d.ticks,
                 d.io.control_period

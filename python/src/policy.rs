@@ -3,7 +3,7 @@
 
 use crate::convert::f32_values;
 use crate::errors::{poisoned, rl_error};
-use fairgrasp_rl::policies::Policy as NativePolicy;
+use fairgrasp_rl::Policy as NativePolicy;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use std::path::PathBuf;
@@ -115,7 +115,7 @@ impl Policy {
         let policy = self.inner.lock().map_err(|_| poisoned("policy"))?;
         Ok(format!(
             "Policy({} on {}, obs_dim={}, act_dim={})",
-            policy.meta().algo,
+            policy.meta().algo.algo(),
             policy.env_id(),
             self.obs_dim,
             self.act_dim

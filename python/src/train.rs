@@ -5,8 +5,9 @@
 
 use crate::convert::{apply_settings, table_from_dict, to_toml};
 use crate::errors::{ConfigError, rl_error};
-use fairgrasp_rl::configs::{builtin_table, default_run_dir, holds_a_run};
-use fairgrasp_rl::policies::Policy as NativePolicy;
+use fairgrasp_rl::Policy as NativePolicy;
+use fairgrasp_rl::configs::builtin_table;
+use fairgrasp_rl::train::RunDir;
 use fairgrasp_rl::train::{
     HELD_OUT_SEED_BASE, Progress, TrainConfig, evaluate as native_evaluate, resume_until,
     train_until,
@@ -178,14 +179,16 @@ pub fn train(
     }
     let config = TrainConfig::from_toml_str(&table.to_string(), &[]).map_err(rl_error)?;
     let run_dir = match run_dir {
-        Some(dir) if holds_a_run(&dir) => {
+        Some(dir) if RunDir::new(&dir).holds_a_run() => {
             return Err(ConfigError::new_err(format!(
                 "invalid setting `run_dir`: {} already holds a training run; continue it with resume=True or choose another",
                 dir.display()
             )));
         }
         Some(dir) => dir,
-        None => default_run_dir(config.algo.as_str(), &config.env_id),
+        None => RunDir::default_for(config.algo.algo().as_str(), &config.env_id)
+            .path()
+            .to_path_buf(),
     };
     drive(py, callback, |on_progress| {
         train_until(&config, &run_dir, on_progress)

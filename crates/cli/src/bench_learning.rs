@@ -7,9 +7,10 @@
 //! output file is rewritten, the rest of the file is kept.
 
 use anyhow::{Context, Result, bail};
+use fairgrasp_rl::Algo;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::logger::ProgressLog;
-use fairgrasp_rl::policies::Policy;
-use fairgrasp_rl::train::{Algo, EvalResult, HELD_OUT_SEED_BASE, TrainSummary};
+use fairgrasp_rl::train::{EvalResult, HELD_OUT_SEED_BASE, TrainSummary};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

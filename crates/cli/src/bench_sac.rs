@@ -30,17 +30,17 @@ pub struct SacBenchArgs {
 pub fn run(args: &SacBenchArgs) -> Result<()> {
     ensure!(args.seconds > 0.0, "--seconds must be positive");
     ensure!(args.transitions > 0, "--transitions must be at least 1");
-    let table = fairgrasp_rl::configs::builtin_table(
-        fairgrasp_env::ENV_ID,
-        fairgrasp_rl::train::Algo::Sac,
-    )?;
+    let table =
+        fairgrasp_rl::configs::builtin_table(fairgrasp_env::ENV_ID, fairgrasp_rl::Algo::Sac)?;
     let config = TrainConfig::from_toml_str(&table.to_string(), &args.overrides)?;
     let env = registry::make(&config.env_id, &config.env)?;
     let (obs_dim, act_dim) = (
         env.observation_space().shape[0],
         env.action_space().low.len(),
     );
-    let mut sac_config = config.sac.clone();
+    let fairgrasp_rl::AlgoConfig::Sac(mut sac_config) = config.algo else {
+        anyhow::bail!("--set algo=… must keep SAC: this benchmark times SAC's update");
+    };
     sac_config.buffer_size = args.transitions;
     let mut sac = Sac::new(sac_config.clone(), obs_dim, act_dim, 1, 0)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);

@@ -11,7 +11,7 @@ use fairgrasp_deploy::robot::RobotLink;
 use fairgrasp_deploy::runner::ModelIo;
 use fairgrasp_deploy::safety::{SafetyFilter, Watchdog};
 use fairgrasp_env::GraspConfig;
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};

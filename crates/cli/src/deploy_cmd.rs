@@ -9,7 +9,7 @@ use fairgrasp_deploy::runner::{
     AfterSuccess, DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo, OperatorHost, TwinHost,
 };
 use fairgrasp_deploy::safety::SafetyConfig;
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

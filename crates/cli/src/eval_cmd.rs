@@ -2,7 +2,7 @@
 //! on held-out episodes.
 
 use anyhow::{Context, Result};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::train::{
     Actor, EVAL_SEED_BASE, EvalResult, HELD_OUT_SEED_BASE, evaluate, evaluate_parallel,
 };
@@ -43,7 +43,17 @@ pub struct EvalArgs {
 pub fn run(args: &EvalArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
     if args.deployment.deployment {
-        return crate::eval_deployment::run(args);
+        anyhow::ensure!(
+            args.overrides.is_empty() && args.trace.is_none(),
+            "--set and --trace do not apply to --deployment (the model's own settings are deployed)"
+        );
+        let run = crate::eval_deployment::Run {
+            model: &args.model,
+            episodes: args.episodes,
+            seed: args.seed,
+            json: args.json,
+        };
+        return crate::eval_deployment::run(&run, &args.deployment);
     }
     let mut policy = Policy::load(&args.model)
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
@@ -103,7 +113,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             "{{\"model\": {:?}, \"env_id\": {:?}, \"algo\": {:?}, \"trained_steps\": {}, \"episodes\": {}, \"seed\": {}, \"success_rate\": {}, \"mean_return\": {}, \"mean_length\": {}, \"final_extras\": {}, \"seconds\": {seconds:.2}}}",
             dir,
             env_id,
-            meta.algo,
+            meta.algo.algo().as_str(),
             meta.num_timesteps,
             args.episodes,
             args.seed,
@@ -115,7 +125,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     } else {
         println!(
             "{} ({} on {}, trained {} steps), {} episodes from seed {}:",
-            dir, meta.algo, env_id, meta.num_timesteps, args.episodes, args.seed
+            dir,
+            meta.algo.algo(),
+            env_id,
+            meta.num_timesteps,
+            args.episodes,
+            args.seed
         );
         println!(
             "  success rate {:.1}% ({} of {})",

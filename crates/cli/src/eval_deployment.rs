@@ -4,7 +4,6 @@
 //! latencies: what `fairgrasp deploy` on `fairgrasp twin` measures, without sockets or real
 //! time, so it is fast and independent of the host's load.
 
-use crate::eval_cmd::EvalArgs;
 use anyhow::{Context, Result};
 use fairgrasp_deploy::calibration::Calibration;
 use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, ModelIo};
@@ -12,7 +11,7 @@ use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::evaluation::{Evaluation, evaluate};
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::train::wilson_lower_bound;
 
 #[derive(clap::Args)]
@@ -44,13 +43,20 @@ pub struct DeploymentEvalArgs {
     pub log: Option<std::path::PathBuf>,
 }
 
-pub fn run(args: &EvalArgs) -> Result<()> {
-    let d = &args.deployment;
-    anyhow::ensure!(
-        args.overrides.is_empty() && args.trace.is_none(),
-        "--set and --trace do not apply to --deployment (the model's own settings are deployed)"
-    );
-    let policy = Policy::load(&args.model)
+/// What `fairgrasp eval` names besides the deployment's own options.
+pub struct Run<'a> {
+    /// The model directory.
+    pub model: &'a std::path::Path,
+    /// Episodes to play.
+    pub episodes: u32,
+    /// The first episode's seed.
+    pub seed: u64,
+    /// Print the result as JSON.
+    pub json: bool,
+}
+
+pub fn run(args: &Run<'_>, d: &DeploymentEvalArgs) -> Result<()> {
+    let policy = Policy::load(args.model)
         .with_context(|| format!("cannot load model {}", args.model.display()))?;
     let io = ModelIo::for_policy(&policy)?;
     let calibration = Calibration::identity(&io.limits_rad);
@@ -86,7 +92,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     };
     let evaluation = evaluate(
         &link,
-        &args.model,
+        args.model,
         &calibration,
         &options,
         args.seed,

@@ -2,8 +2,10 @@
 //! saving, checkpoints and resume, TensorBoard and CSV logs, and a progress bar.
 
 use anyhow::{Context, Result, bail};
-use fairgrasp_rl::configs::{builtin_table, default_run_dir, holds_a_run};
-use fairgrasp_rl::train::{Algo, Progress, TrainConfig, TrainSummary, resume_until, train_until};
+use fairgrasp_rl::Algo;
+use fairgrasp_rl::configs::builtin_table;
+use fairgrasp_rl::train::RunDir;
+use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume_until, train_until};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -127,7 +129,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let run_dir = match &args.run_dir {
         Some(dir) => {
-            if holds_a_run(dir) {
+            if RunDir::new(dir).holds_a_run() {
                 bail!(
                     "{} already holds a training run; continue it with --resume {0}, or choose another --run-dir",
                     dir.display()
@@ -135,11 +137,13 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             }
             dir.clone()
         }
-        None => default_run_dir(config.algo.as_str(), &config.env_id),
+        None => RunDir::default_for(config.algo.algo().as_str(), &config.env_id)
+            .path()
+            .to_path_buf(),
     };
     println!(
         "training {} on {} for {} steps ({} envs, seed {}) into {}",
-        config.algo.as_str(),
+        config.algo.algo().as_str(),
         config.env_id,
         config.total_timesteps,
         config.n_envs,

@@ -353,6 +353,7 @@ fn env_commands_take_any_registered_id() {
 
 #[test]
 fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_them() {
+    use fairgrasp_rl::AlgoConfig;
     use fairgrasp_rl::algorithm::Algorithm;
     use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, save_model};
     use fairgrasp_rl::ppo::{Ppo, PpoConfig};
@@ -363,12 +364,9 @@ fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_the
     let ppo = Ppo::new(config.clone(), 3, 1, 1, 0).unwrap();
     let meta = ModelMeta {
         format_version: FORMAT_VERSION,
-        algo: "ppo".into(),
+        algo: AlgoConfig::Ppo(config),
         obs_dim: 3,
         act_dim: 1,
-        ppo: Some(config),
-        sac: None,
-        td3: None,
         env_id: "Pendulum-v1".into(),
         env: serde_json::json!({}),
         normalization: None,

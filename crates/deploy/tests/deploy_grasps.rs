@@ -18,7 +18,7 @@ use fairgrasp_deploy::runner::{
 };
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::{Twin, TwinConfig};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};

@@ -11,7 +11,7 @@ use fairgrasp_deploy::runner::{DeployOptions, Deployment, JsonLog, ModelIo, RunR
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::{Twin, TwinConfig, TwinHandle};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

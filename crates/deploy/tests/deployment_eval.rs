@@ -8,7 +8,7 @@ use fairgrasp_deploy::runner::{AfterSuccess, DeployOptions, Deployment, JsonLog,
 use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::evaluation::{Evaluation, evaluate};
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;

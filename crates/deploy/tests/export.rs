@@ -7,10 +7,11 @@ use fairgrasp_deploy::export::{Format, export, export_policy};
 use fairgrasp_env::random::standard_normal;
 use fairgrasp_env::wrappers::{RescaleAction, VecNormalizeConfig, VecNormalizeState};
 use fairgrasp_env::{Env, RunningMeanStd, registry};
+use fairgrasp_rl::AlgoConfig;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::algorithm::{Algorithm, TensorMap};
 use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, env_table, save_model};
 use fairgrasp_rl::nn::Activation;
-use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use fairgrasp_rl::sac::{Sac, SacConfig};
 use fairgrasp_rl::td3::{Td3, Td3Config};
@@ -39,7 +40,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
     let env = registry::make(case.env_id, &env_table(&case.env).unwrap()).unwrap();
     let (obs_dim, act_dim) = (env.observation_space().dim(), env.action_space().dim());
     let net_arch = vec![64, 32];
-    let (ppo, sac, td3, weights) = match case.algo {
+    let (algo, weights) = match case.algo {
         "ppo" => {
             let config = PpoConfig {
                 net_arch,
@@ -47,7 +48,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
                 ..PpoConfig::default()
             };
             let learner = Ppo::new(config.clone(), obs_dim, act_dim, 1, seed).unwrap();
-            (Some(config), None, None, learner.weights().unwrap())
+            (AlgoConfig::Ppo(config), learner.weights().unwrap())
         }
         "td3" => {
             let config = Td3Config {
@@ -58,7 +59,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
                 ..Td3Config::default()
             };
             let learner = Td3::new(config.clone(), obs_dim, act_dim, 1, seed).unwrap();
-            (None, None, Some(config), learner.weights().unwrap())
+            (AlgoConfig::Td3(config), learner.weights().unwrap())
         }
         _ => {
             let config = SacConfig {
@@ -69,7 +70,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
                 ..SacConfig::default()
             };
             let learner = Sac::new(config.clone(), obs_dim, act_dim, 1, seed).unwrap();
-            (None, Some(config), None, learner.weights().unwrap())
+            (AlgoConfig::Sac(config), learner.weights().unwrap())
         }
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -104,12 +105,9 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
     });
     let meta = ModelMeta {
         format_version: FORMAT_VERSION,
-        algo: case.algo.into(),
+        algo,
         obs_dim,
         act_dim,
-        ppo,
-        sac,
-        td3,
         env_id: case.env_id.into(),
         env: case.env.clone(),
         normalization,

@@ -16,7 +16,7 @@ use fairgrasp_deploy::runner::{
     DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo, OperatorHost, RunReport, TwinHost,
 };
 use fairgrasp_deploy::twin::{Twin, TwinConfig, TwinHandle};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

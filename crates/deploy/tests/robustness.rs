@@ -8,6 +8,7 @@ use fairgrasp_deploy::robustness::{
 use fairgrasp_env::arm::ActionMode;
 use fairgrasp_env::tasks::grasp::GraspConfig;
 use fairgrasp_env::{Env, GraspEnv};
+use fairgrasp_rl::AlgoConfig;
 use fairgrasp_rl::algorithm::Algorithm;
 use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, save_model};
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
@@ -36,12 +37,9 @@ fn tiny_model(dir: &Path) {
     let ppo = Ppo::new(ppo_config.clone(), obs_dim, act_dim, 1, 3).unwrap();
     let meta = ModelMeta {
         format_version: FORMAT_VERSION,
-        algo: "ppo".into(),
+        algo: AlgoConfig::Ppo(ppo_config),
         obs_dim,
         act_dim,
-        ppo: Some(ppo_config),
-        sac: None,
-        td3: None,
         env_id: ENV_ID.into(),
         env: serde_json::to_value(&config).unwrap(),
         normalization: None,

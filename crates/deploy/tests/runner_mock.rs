@@ -7,7 +7,7 @@ use fairgrasp_deploy::robot::{RobotCommand, RobotLink, RobotState, StampedState}
 use fairgrasp_deploy::runner::{DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo};
 use fairgrasp_deploy::safety::{Fault, SafetyConfig};
 use fairgrasp_deploy::{DeployError, Result};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::{Path, PathBuf};

@@ -23,7 +23,7 @@ use fairgrasp_deploy::safety::SafetyConfig;
 use fairgrasp_deploy::twin::faults::FaultCommand;
 use fairgrasp_deploy::twin::simulated::{SimulatedController, SimulatedSettings};
 use fairgrasp_deploy::twin::{Twin, TwinConfig};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::train::{HELD_OUT_SEED_BASE, TrainConfig, train};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -21,6 +21,12 @@ pub trait Algorithm {
     /// Environment steps taken so far (all environments together).
     fn num_timesteps(&self) -> u64;
 
+    /// Log the training scalars at most once per this many environment steps (0: after every
+    /// iteration). Off-policy learners iterate once per vector step and log every 1,000.
+    fn log_interval(&self) -> u64 {
+        0
+    }
+
     /// Sets the step counter (when resuming from a checkpoint).
     fn set_num_timesteps(&mut self, steps: u64);
 

@@ -1,28 +1,37 @@
 //! The built-in training configurations: the files in `configs/`, compiled in so that `fairgrasp
 //! train` and Python's `fairgrasp.train()` start from the same tuned settings in any directory.
 
+use crate::algo::Algo;
 use crate::error::{Result, RlError};
-use crate::train::Algo;
-use std::path::{Path, PathBuf};
 
-pub const PPO_GRASP_TOML: &str = include_str!("../../../configs/ppo_grasp.toml");
-pub const SAC_GRASP_TOML: &str = include_str!("../../../configs/sac_grasp.toml");
-pub const TD3_GRASP_TOML: &str = include_str!("../../../configs/td3_grasp.toml");
-pub const PPO_PICK_PLACE_TOML: &str = include_str!("../../../configs/ppo_pick_place.toml");
-pub const PPO_SORT_TOML: &str = include_str!("../../../configs/ppo_sort.toml");
+/// The files of `configs/` a run starts from, by name: `<algo>_<env>` (see [`short_env_name`]).
+/// Every algorithm has a `<algo>_grasp`.
+pub const BUILTIN_CONFIGS: [(&str, &str); 5] = [
+    ("ppo_grasp", include_str!("../../../configs/ppo_grasp.toml")),
+    ("sac_grasp", include_str!("../../../configs/sac_grasp.toml")),
+    ("td3_grasp", include_str!("../../../configs/td3_grasp.toml")),
+    (
+        "ppo_pick_place",
+        include_str!("../../../configs/ppo_pick_place.toml"),
+    ),
+    ("ppo_sort", include_str!("../../../configs/ppo_sort.toml")),
+];
 
 /// The built-in configuration text for an env and algorithm, and whether it was tuned for that
 /// env (else it is the algorithm's grasp file, whose `[env]` table is the grasp task's).
 pub fn builtin_config(env_id: &str, algo: Algo) -> (&'static str, bool) {
-    match (env_id, algo) {
-        ("FaArmPickPlace-v0", Algo::Ppo) => (PPO_PICK_PLACE_TOML, true),
-        ("FaArmSort-v0", Algo::Ppo) => (PPO_SORT_TOML, true),
-        (fairgrasp_env::ENV_ID, Algo::Ppo) => (PPO_GRASP_TOML, true),
-        (fairgrasp_env::ENV_ID, Algo::Sac) => (SAC_GRASP_TOML, true),
-        (fairgrasp_env::ENV_ID, Algo::Td3) => (TD3_GRASP_TOML, true),
-        (_, Algo::Ppo) => (PPO_GRASP_TOML, false),
-        (_, Algo::Sac) => (SAC_GRASP_TOML, false),
-        (_, Algo::Td3) => (TD3_GRASP_TOML, false),
+    let named = |name: String| {
+        BUILTIN_CONFIGS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, text)| *text)
+    };
+    match named(format!("{algo}_{}", short_env_name(env_id))) {
+        Some(text) => (text, true),
+        None => match named(format!("{algo}_grasp")) {
+            Some(text) => (text, false),
+            None => unreachable!("no built-in {algo}_grasp config (a test checks every algorithm)"),
+        },
     }
 }
 
@@ -53,33 +62,6 @@ pub fn short_env_name(env_id: &str) -> String {
     out
 }
 
-/// `runs/<algo>_<env>` (e.g. `runs/ppo_grasp`), or the first free `runs/<algo>_<env>_<n>`: where
-/// a run goes when no directory is named.
-pub fn default_run_dir(algo: &str, env_id: &str) -> PathBuf {
-    next_free_run_dir(
-        Path::new("runs"),
-        &format!("{algo}_{}", short_env_name(env_id)),
-    )
-}
-
-/// Whether `dir` already holds a training run (its config or checkpoints).
-pub fn holds_a_run(dir: &Path) -> bool {
-    dir.join("config.toml").exists() || dir.join("checkpoints").exists()
-}
-
-/// `runs/<name>` (e.g. `ppo_grasp`), or `runs/<name>_<n>` with the first free n (like SB3's
-/// `PPO_1`, `PPO_2`, … TensorBoard runs).
-pub fn next_free_run_dir(root: &Path, name: &str) -> PathBuf {
-    let first = root.join(name);
-    if !holds_a_run(&first) {
-        return first;
-    }
-    (2..)
-        .map(|n| root.join(format!("{name}_{n}")))
-        .find(|dir| !holds_a_run(dir))
-        .expect("an unused run directory")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -98,7 +80,7 @@ mod tests {
                     ],
                 )
                 .unwrap_or_else(|e| panic!("{id}/{algo}: {e}"));
-                assert_eq!(config.algo, algo);
+                assert_eq!(config.algo.algo(), algo);
                 if !builtin_config(id, algo).1 {
                     assert!(
                         config.env.is_empty(),

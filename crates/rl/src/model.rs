@@ -1,16 +1,14 @@
 //! Saved models. A model directory is self-contained: `model.safetensors` (the weights of every
 //! network) and `model.json` ([`ModelMeta`]: algorithm and its settings, network sizes, the
 //! environment it was trained on, observation normalisation statistics).
-//! [`crate::policies::Policy`] loads one to act.
+//! [`crate::Policy`] loads one to act.
 //!
 //! Directories are replaced whole (written beside the target, then renamed over it), so a crash
 //! while saving leaves the previous model readable.
 
+use crate::algo::{Algo, AlgoConfig};
 use crate::algorithm::TensorMap;
 use crate::error::{Result, RlError};
-use crate::ppo::PpoConfig;
-use crate::sac::SacConfig;
-use crate::td3::Td3Config;
 use candle_core::Device;
 use fairgrasp_env::atomic;
 use serde::{Deserialize, Serialize};
@@ -29,16 +27,11 @@ const V1_ENV_ID: &str = "FaArmGrasp-v0";
 #[serde(deny_unknown_fields)]
 pub struct ModelMeta {
     pub format_version: u32,
-    /// `"ppo"`, `"sac"` or `"td3"`.
-    pub algo: String,
+    /// The algorithm and its settings: `"algo": "sac"` beside a `"sac"` object.
+    #[serde(flatten)]
+    pub algo: AlgoConfig,
     pub obs_dim: usize,
     pub act_dim: usize,
-    #[serde(default)]
-    pub ppo: Option<PpoConfig>,
-    #[serde(default)]
-    pub sac: Option<SacConfig>,
-    #[serde(default)]
-    pub td3: Option<Td3Config>,
     /// Id of the environment the model was trained on (`"FaArmGrasp-v0"`).
     pub env_id: String,
     /// Its configuration, as the environment registry writes and parses it (opaque here).
@@ -104,15 +97,25 @@ impl ModelMeta {
                 ));
             }
         }
+        // A training config may leave its algorithm's table to the defaults; a model may not: its
+        // weights were shaped by those settings.
+        if let Some(algo) = value.get("algo").and_then(serde_json::Value::as_str)
+            && algo.parse::<Algo>().is_ok()
+            && value.get(algo).is_none_or(serde_json::Value::is_null)
+        {
+            return Err(format!(
+                "it names algorithm {algo} but has no `{algo}` settings"
+            ));
+        }
         serde_json::from_value(value).map_err(|e| not_a_model(&e))
     }
 
     /// Errors unless the model was made by `algo` for these observation and action sizes.
-    pub fn check_compatible(&self, algo: &str, obs_dim: usize, act_dim: usize) -> Result<()> {
-        if self.algo != algo {
+    pub fn check_compatible(&self, algo: Algo, obs_dim: usize, act_dim: usize) -> Result<()> {
+        if self.algo.algo() != algo {
             return Err(RlError::Model(format!(
                 "the model was trained with {}, not {algo}",
-                self.algo
+                self.algo.algo()
             )));
         }
         if (self.obs_dim, self.act_dim) != (obs_dim, act_dim) {
@@ -337,8 +340,11 @@ mod tests {
         // The action settings moved to `[control]`.
         assert_eq!(meta.env["control"]["action_mode"], "cartesian");
         assert!(meta.env["task"].get("action_mode").is_none());
-        let ppo = meta.ppo.as_ref().unwrap();
+        let crate::algo::AlgoConfig::Ppo(ppo) = &meta.algo else {
+            panic!("a PPO model read as {:?}", meta.algo.algo());
+        };
         assert_eq!(ppo.net_arch, [128, 128]);
+        assert_eq!(ppo.log_std_init, -0.5);
         assert_eq!(ppo.features, crate::policies::FeaturesConfig::Flatten {});
         assert_eq!((meta.obs_dim, meta.act_dim, meta.n_envs), (40, 5, 16));
 
@@ -346,6 +352,7 @@ mod tests {
         let text = serde_json::to_string(&meta).unwrap();
         assert!(text.contains("\"format_version\":2") && text.contains("\"env_id\""));
         let again = ModelMeta::from_json(&text).unwrap();
+        assert_eq!(again.algo, meta.algo);
         assert_eq!((again.env_id, again.env), (meta.env_id, meta.env));
     }
 

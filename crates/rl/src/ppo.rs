@@ -15,10 +15,11 @@ use crate::algorithm::{
 };
 use crate::buffers::RolloutBuffer;
 use crate::error::{ConfigSection, Result, RlError};
-use crate::kernels::ppo_loss::{FusedPpoLoss, Minibatch, MinibatchStats};
+use crate::kernels::ppo_loss::{FusedPpoLoss, LossCoefficients, Minibatch, MinibatchStats};
 use crate::nn::{Activation, Adam};
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
+use crate::policies::net_config::NetConfig;
 use candle_core::{DType, Device, Tensor};
 use fairgrasp_env::{Info, RunningMeanStd, VecStep, VectorEnv};
 use rand::SeedableRng;
@@ -96,6 +97,32 @@ impl Default for PpoConfig {
             privileged_critic: false,
         }
     }
+}
+
+impl PpoConfig {
+    /// The shape of the networks (the policy's part of these settings).
+    pub fn net(&self) -> NetConfig {
+        NetConfig {
+            net_arch: self.net_arch.clone(),
+            activation: self.activation,
+            features: self.features.clone(),
+        }
+    }
+}
+
+/// The acting network of a saved model: the actor-critic (its value head included, so that
+/// every tensor of `weights` is checked).
+pub(crate) fn load_actor(
+    weights: &TensorMap,
+    obs_dim: usize,
+    act_dim: usize,
+    privileged_dim: usize,
+    config: &PpoConfig,
+) -> Result<ActorCritic> {
+    let net = config.net();
+    let policy = ActorCritic::zeroed(obs_dim, act_dim, privileged_dim, &net, config.log_std_init)?;
+    load_varmap(&policy.varmap, weights)?;
+    Ok(policy)
 }
 
 /// Statistics of one PPO update (SB3's `train/*` scalars).
@@ -322,7 +349,14 @@ impl Ppo {
             (true, dim) => dim,
         };
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let policy = ActorCritic::new(obs_dim, act_dim, privileged_dim, &config, &mut rng)?;
+        let policy = ActorCritic::new(
+            obs_dim,
+            act_dim,
+            privileged_dim,
+            &config.net(),
+            config.log_std_init,
+            &mut rng,
+        )?;
         let optimizer = Adam::new(&policy.varmap, config.learning_rate)?;
         let buffer = RolloutBuffer::new(config.n_steps, n_envs, obs_dim, act_dim)
             .with_privileged(privileged_dim);
@@ -468,7 +502,18 @@ impl Ppo {
         };
         let (mut pg_sum, mut v_sum, mut ent_sum, mut kl_sum, mut clip_sum, mut gn_sum, mut count) =
             (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
-        let fused = self.written_out_loss && FusedPpoLoss::supports(&c);
+        // The written-out loss computes the default actor-critic's (tanh heads on flat
+        // observations, no value clipping); other settings run the tensor code below.
+        let fused = self.written_out_loss
+            && c.activation == Activation::Tanh
+            && c.clip_range_vf.is_none()
+            && c.features == FeaturesConfig::Flatten {};
+        let coefficients = LossCoefficients {
+            clip_range: c.clip_range,
+            ent_coef: c.ent_coef,
+            vf_coef: c.vf_coef,
+            normalize_advantage: c.normalize_advantage,
+        };
         let names: Vec<String> = self.optimizer.vars().map(|(n, _)| n.to_string()).collect();
         let names: Vec<&str> = names.iter().map(String::as_str).collect();
         'epochs: for epoch in 0..c.n_epochs {
@@ -476,9 +521,12 @@ impl Ppo {
             for batch in indices.chunks(c.batch_size) {
                 if fused {
                     self.minibatch.gather(&self.buffer, batch);
-                    let s: MinibatchStats =
-                        self.fused
-                            .compute(&self.policy, &c, &self.minibatch.as_minibatch())?;
+                    let (pi, vf) = self.policy.heads();
+                    let s: MinibatchStats = self.fused.compute(
+                        (pi, vf, self.policy.log_std()),
+                        &coefficients,
+                        &self.minibatch.as_minibatch(),
+                    )?;
                     if let Some(target) = c.target_kl
                         && s.approx_kl > 1.5 * target
                     {
@@ -718,4 +766,98 @@ pub(crate) fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
     section.net_arch(&c.net_arch)?;
     section.non_negative("ent_coef", c.ent_coef)?;
     section.non_negative("vf_coef", c.vf_coef)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fairgrasp_env::random::standard_normal;
+    use rand::Rng;
+
+    /// A learner with a synthetic rollout (the same for the same seeds); with a privileged
+    /// critic, 4 privileged values per observation.
+    fn learner(config: &PpoConfig, written_out: bool) -> Ppo {
+        let (obs_dim, act_dim, n_envs) = (5, 3, 2);
+        let pd = if config.privileged_critic { 4 } else { 0 };
+        let mut ppo =
+            Ppo::with_privileged(config.clone(), obs_dim, act_dim, pd, n_envs, 4).unwrap();
+        ppo.written_out_loss = written_out;
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let mut obs = vec![0.0f32; n_envs * obs_dim];
+        let mut privileged = vec![0.0f32; n_envs * pd];
+        while !ppo.buffer.is_full() {
+            obs.iter_mut().for_each(|v| *v = standard_normal(&mut rng));
+            privileged
+                .iter_mut()
+                .for_each(|v| *v = standard_normal(&mut rng));
+            let critic_obs: Vec<f32> = (obs.chunks(obs_dim).zip(privileged.chunks(pd.max(1))))
+                .flat_map(|(o, p)| o.iter().chain(&p[..pd]).copied())
+                .collect();
+            let critic = (pd > 0).then_some(critic_obs.as_slice());
+            let out = (ppo.policy)
+                .act_with_critic(&obs, critic, false, &mut ppo.rng)
+                .unwrap();
+            let rewards: Vec<f32> = (0..n_envs).map(|_| rng.random::<f32>()).collect();
+            let starts: Vec<bool> = (0..n_envs).map(|_| rng.random::<f32>() < 0.1).collect();
+            ppo.buffer.push(
+                &obs,
+                &out.actions,
+                &rewards,
+                &starts,
+                &out.values,
+                &out.log_probs,
+                &privileged,
+            );
+        }
+        ppo.buffer
+            .compute_returns_and_advantages(&[0.5, -0.5], &[false, true], 0.9, 0.95);
+        ppo
+    }
+
+    #[test]
+    fn trains_the_same_weights_as_candles_autograd() {
+        let base = PpoConfig {
+            n_steps: 40,
+            batch_size: 16,
+            n_epochs: 3,
+            net_arch: vec![8, 6],
+            ..PpoConfig::default()
+        };
+        let variants = [
+            base.clone(),
+            PpoConfig {
+                ent_coef: 0.0,
+                log_std_init: -0.5,
+                ..base.clone()
+            },
+            PpoConfig {
+                normalize_advantage: false,
+                max_grad_norm: 100.0,
+                clip_range: 0.05,
+                ..base.clone()
+            },
+            PpoConfig {
+                privileged_critic: true,
+                ..base.clone()
+            },
+        ];
+        // One thread, and the value head on a second thread beside the policy's.
+        for (config, threads) in variants.into_iter().flat_map(|c| [(c.clone(), 1), (c, 2)]) {
+            let (mut ours, mut reference) = (learner(&config, true), learner(&config, false));
+            ours.set_update_threads(threads).unwrap();
+            for round in 0..3 {
+                let (a, b) = (ours.update(1.0).unwrap(), reference.update(1.0).unwrap());
+                assert_eq!(
+                    a, b,
+                    "update {round} statistics, {threads} threads, {config:?}"
+                );
+                let (wa, wb) = (ours.weights().unwrap(), reference.weights().unwrap());
+                for (name, t) in &wa {
+                    let x: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
+                    let y: Vec<f32> = wb[name].flatten_all().unwrap().to_vec1().unwrap();
+                    assert_eq!(x, y, "`{name}` after update {round}, {threads} threads");
+                }
+            }
+        }
+    }
 }

@@ -21,6 +21,7 @@ use crate::error::{ConfigSection, Result, RlError};
 use crate::nn::{Activation, Adam};
 use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
 use crate::policies::features::FeaturesConfig;
+use crate::policies::net_config::NetConfig;
 use crate::policies::sac_policy::{SacActor, SacPolicy};
 use candle_core::{DType, Device, Var};
 use candle_nn::{VarBuilder, VarMap};
@@ -79,6 +80,17 @@ impl Default for SacConfig {
     }
 }
 
+impl SacConfig {
+    /// The shape of the networks (the policy's part of these settings).
+    pub fn net(&self) -> NetConfig {
+        NetConfig {
+            net_arch: self.net_arch.clone(),
+            activation: self.activation,
+            features: self.features.clone(),
+        }
+    }
+}
+
 pub(crate) fn validate(c: &SacConfig, _n_envs: usize) -> Result<()> {
     let section = ConfigSection("sac");
     let settings = loop_settings!(c);
@@ -120,7 +132,7 @@ impl Networks {
             }
         };
         Ok(Self {
-            policy: SacPolicy::zeroed(obs_dim, act_dim, config)?,
+            policy: SacPolicy::zeroed(obs_dim, act_dim, &config.net())?,
             log_alpha,
         })
     }
@@ -160,6 +172,19 @@ impl Networks {
     pub(crate) fn into_actor(self) -> SacActor {
         self.policy.actor
     }
+}
+
+/// The acting network of a saved model: its actor, once every tensor of `weights` was checked
+/// against the whole learner's networks.
+pub(crate) fn load_actor(
+    weights: &TensorMap,
+    obs_dim: usize,
+    act_dim: usize,
+    config: &SacConfig,
+) -> Result<SacActor> {
+    let nets = Networks::zeroed(obs_dim, act_dim, config)?;
+    nets.load_weights(weights, obs_dim, act_dim, config)?;
+    Ok(nets.into_actor())
 }
 
 /// The variable `name` of `varmap`.
@@ -329,6 +354,10 @@ impl Sac {
 impl Algorithm for Sac {
     fn name(&self) -> &'static str {
         "sac"
+    }
+
+    fn log_interval(&self) -> u64 {
+        1000
     }
 
     fn num_timesteps(&self) -> u64 {

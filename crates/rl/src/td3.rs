@@ -18,6 +18,7 @@ use crate::error::{ConfigSection, Result};
 use crate::nn::{Activation, Adam};
 use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
 use crate::policies::features::FeaturesConfig;
+use crate::policies::net_config::NetConfig;
 use crate::policies::td3_policy::{Td3Actor, Td3Policy};
 use candle_core::Tensor;
 use fairgrasp_env::{VecStep, VectorEnv};
@@ -78,6 +79,17 @@ impl Default for Td3Config {
     }
 }
 
+impl Td3Config {
+    /// The shape of the networks (the policy's part of these settings).
+    pub fn net(&self) -> NetConfig {
+        NetConfig {
+            net_arch: self.net_arch.clone(),
+            activation: self.activation,
+            features: self.features.clone(),
+        }
+    }
+}
+
 pub(crate) fn validate(c: &Td3Config, _n_envs: usize) -> Result<()> {
     let section = ConfigSection("td3");
     let settings = loop_settings!(c);
@@ -89,16 +101,16 @@ pub(crate) fn validate(c: &Td3Config, _n_envs: usize) -> Result<()> {
     section.net_arch(&c.net_arch)
 }
 
-/// Weights of a TD3 model without a learner (for [`crate::policies::Policy`]): builds the
-/// networks, loads `weights` (errors name the tensor at fault) and returns the actor.
+/// The acting network of a saved model: builds the networks, loads `weights` (errors name the
+/// tensor at fault) and returns the actor.
 pub(crate) fn load_actor(
     weights: &TensorMap,
     obs_dim: usize,
     act_dim: usize,
     config: &Td3Config,
 ) -> Result<Td3Actor> {
-    let policy = Td3Policy::zeroed(obs_dim, act_dim, config)?;
-    let scratch = Td3Policy::zeroed(obs_dim, act_dim, config)?;
+    let policy = Td3Policy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
+    let scratch = Td3Policy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
     load_grouped(&policy.groups(), &scratch.groups(), weights)?;
     Ok(policy.actor)
 }
@@ -123,7 +135,7 @@ impl Td3 {
     ) -> Result<Self> {
         validate(&config, n_envs)?;
         let mut core = OffPolicyCore::new("td3", loop_settings!(config), obs_dim, act_dim, seed)?;
-        let policy = Td3Policy::zeroed(obs_dim, act_dim, &config)?;
+        let policy = Td3Policy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
         policy.init_weights(&mut core.rng)?;
         let lr = config.learning_rate;
         Ok(Self {
@@ -229,6 +241,10 @@ impl Algorithm for Td3 {
         "td3"
     }
 
+    fn log_interval(&self) -> u64 {
+        1000
+    }
+
     fn num_timesteps(&self) -> u64 {
         self.core.num_timesteps
     }
@@ -268,7 +284,12 @@ impl Algorithm for Td3 {
     }
 
     fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
-        let scratch = Td3Policy::zeroed(self.core.obs_dim, self.core.act_dim, &self.config)?;
+        let scratch = Td3Policy::zeroed(
+            self.core.obs_dim,
+            self.core.act_dim,
+            &self.config.net(),
+            self.config.action_noise,
+        )?;
         load_grouped(&self.policy.groups(), &scratch.groups(), weights)
     }
 

@@ -6,14 +6,14 @@
 //! one, in the release build); the cap below only bounds a run that stopped learning.
 
 use fairgrasp_env::ENV_ID;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::configs::builtin_table;
 use fairgrasp_rl::evaluation::evaluate;
-use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{HELD_OUT_SEED_BASE, TrainConfig, train};
 
 #[test]
 fn the_default_training_reaches_its_stop_rule_and_its_model_grasps_held_out_episodes() {
-    let table = builtin_table(ENV_ID, fairgrasp_rl::train::Algo::Ppo).unwrap();
+    let table = builtin_table(ENV_ID, fairgrasp_rl::Algo::Ppo).unwrap();
     let config = TrainConfig::from_toml_str(
         &table.to_string(),
         &["total_timesteps=1000000".into(), "checkpoint_freq=0".into()],

@@ -6,28 +6,24 @@ use fairgrasp_env::wrappers::{RescaleAction, VecNormalize, VecNormalizeConfig};
 use fairgrasp_env::{Env, VecEnv, VectorEnv};
 use fairgrasp_rl::algorithm::{Algorithm, TensorMap};
 use fairgrasp_rl::model::{FORMAT_VERSION, ModelMeta, load_tensors, save_model};
-use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::ppo::{Ppo, PpoConfig};
 use fairgrasp_rl::sac::{Sac, SacConfig};
 use fairgrasp_rl::td3::{Td3, Td3Config};
+use fairgrasp_rl::{AlgoConfig, Policy};
 use std::path::Path;
 
 /// `model.json` for a learner trained on a classic task with observation normalisation.
 fn meta<V: VectorEnv>(
-    ppo: Option<PpoConfig>,
-    sac: Option<SacConfig>,
+    algo: AlgoConfig,
     venv: &VecNormalize<V>,
     env_id: &str,
     steps: u64,
 ) -> ModelMeta {
     ModelMeta {
         format_version: FORMAT_VERSION,
-        algo: if ppo.is_some() { "ppo" } else { "sac" }.into(),
+        algo,
         obs_dim: venv.obs_dim(),
         act_dim: venv.act_dim(),
-        ppo,
-        sac,
-        td3: None,
         env_id: env_id.into(),
         env: serde_json::json!({ "max_steps": 50 }),
         normalization: Some(venv.state().to_json()),
@@ -94,8 +90,7 @@ fn a_loaded_ppo_policy_acts_exactly_as_its_learner() {
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model");
     let meta = meta(
-        Some(config),
-        None,
+        AlgoConfig::Ppo(config),
         &venv,
         "PointReach-v0",
         ppo.num_timesteps,
@@ -152,8 +147,7 @@ fn a_loaded_sac_policy_acts_exactly_as_its_learner() {
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model");
     let meta = meta(
-        None,
-        Some(config),
+        AlgoConfig::Sac(config),
         &venv,
         "Pendulum-v1",
         sac.num_timesteps(),
@@ -195,9 +189,12 @@ fn a_loaded_td3_policy_acts_exactly_as_its_learner() {
     assert!(td3.n_updates() > 1);
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model");
-    let mut meta = meta(None, None, &venv, "Pendulum-v1", td3.num_timesteps());
-    meta.algo = "td3".into();
-    meta.td3 = Some(config);
+    let meta = meta(
+        AlgoConfig::Td3(config),
+        &venv,
+        "Pendulum-v1",
+        td3.num_timesteps(),
+    );
     save_model(&model, &td3.weights().unwrap(), &meta).unwrap();
 
     let env = RescaleAction::new(Pendulum::new()).unwrap();
@@ -230,7 +227,7 @@ fn errors_name_the_model_and_the_problem() {
     let ppo = Ppo::new(config.clone(), 6, 2, 1, 0).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model");
-    let meta = meta(Some(config), None, &venv, "PointReach-v0", 0);
+    let meta = meta(AlgoConfig::Ppo(config), &venv, "PointReach-v0", 0);
     save_model(&model, &ppo.weights().unwrap(), &meta).unwrap();
     let mut policy = Policy::load(&model).unwrap();
     let name = model.display().to_string();
@@ -304,24 +301,32 @@ fn errors_name_the_model_and_the_problem() {
             },
             "normalisation statistics: not a valid",
         ),
-        (
-            ModelMeta {
-                algo: "dqn".into(),
-                ..meta.clone()
-            },
-            "unknown algorithm `dqn`",
-        ),
-        (
-            ModelMeta {
-                ppo: None,
-                ..meta.clone()
-            },
-            "no `ppo` settings",
-        ),
     ];
     for (bad, problem) in metas {
         let target = dir.path().join("bad_meta");
         save_model(&target, &weights, &bad).unwrap();
+        let err = Policy::load(&target).err().unwrap().to_string();
+        assert!(err.contains("model.json") && err.contains(problem), "{err}");
+    }
+    // An algorithm this build does not know, or one without its settings.
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(Edit, &str); 2] = [
+        (|m| m["algo"] = "dqn".into(), "unknown variant `dqn`"),
+        (
+            |m| {
+                m.as_object_mut().unwrap().remove("ppo");
+            },
+            "names algorithm ppo but has no `ppo` settings",
+        ),
+    ];
+    for (edit, problem) in edits {
+        let target = dir.path().join("bad_meta");
+        save_model(&target, &weights, &meta).unwrap();
+        let path = target.join("model.json");
+        let mut json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        edit(&mut json);
+        std::fs::write(&path, json.to_string()).unwrap();
         let err = Policy::load(&target).err().unwrap().to_string();
         assert!(err.contains("model.json") && err.contains(problem), "{err}");
     }
@@ -362,7 +367,7 @@ fn models_saved_in_format_1_load_and_act_as_their_weights_say() {
     for algo in ["ppo", "sac"] {
         let dir = data.join(algo);
         let mut policy = Policy::load(&dir).unwrap();
-        assert_eq!(policy.meta().algo, algo);
+        assert_eq!(policy.meta().algo.algo().as_str(), algo);
         assert_eq!(policy.meta().format_version, FORMAT_VERSION);
         assert_eq!(policy.env_id(), "FaArmGrasp-v0");
         assert!(policy.env_config()["task"].is_object());

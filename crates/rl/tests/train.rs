@@ -1,10 +1,14 @@
 //! A short training run writes what SB3 users expect, readable by an event-file reader; runs
 //! resume from checkpoints; saved models load back or fail with a clear error.
 
+use fairgrasp_rl::Algo;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::logger::read_scalars;
 use fairgrasp_rl::model::load_tensors;
-use fairgrasp_rl::policies::Policy;
-use fairgrasp_rl::train::{TrainConfig, checkpoints, resume, train};
+use fairgrasp_rl::train::{
+    Callback, CallbackContext, StopReason, TrainConfig, checkpoints, resume, train, train_with,
+};
+use std::ops::ControlFlow;
 use std::path::Path;
 
 /// A tiny PPO run: 2 envs × 128 steps per iteration, 4 minibatches × 2 epochs per update.
@@ -122,6 +126,60 @@ fn a_short_run_writes_config_logs_best_model_and_checkpoints() {
             .iter()
             .all(|s| s.value.is_finite() || s.tag == "train/explained_variance")
     );
+}
+
+/// A caller's callback: counts the vector steps and iterations it saw, and stops the run once
+/// `stop_at` environment steps are done.
+struct StopAt {
+    stop_at: u64,
+    vector_steps: u64,
+    iterations: Vec<u64>,
+}
+
+impl Callback for StopAt {
+    fn on_step(&mut self, _step: &fairgrasp_env::VecStep<'_>) {
+        self.vector_steps += 1;
+    }
+
+    fn on_iteration(
+        &mut self,
+        ctx: &mut CallbackContext<'_>,
+    ) -> fairgrasp_rl::error::Result<ControlFlow<StopReason>> {
+        self.iterations.push(ctx.num_timesteps);
+        // What a callback can read: the run's settings and the model as it is now.
+        assert_eq!(ctx.config.n_envs, 2);
+        assert_eq!(ctx.model()?.0.num_timesteps, ctx.num_timesteps);
+        Ok(match ctx.num_timesteps >= self.stop_at {
+            true => ControlFlow::Break(StopReason::Requested),
+            false => ControlFlow::Continue(()),
+        })
+    }
+}
+
+#[test]
+fn a_callback_passed_to_the_library_sees_every_step_and_stops_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let mut callback = StopAt {
+        stop_at: 512,
+        vector_steps: 0,
+        iterations: Vec::new(),
+    };
+    let summary = train_with(&tiny_config(100_000), &run, vec![Box::new(&mut callback)]).unwrap();
+    // 2 envs × 128 steps per iteration: the second iteration reaches 512 and stops the run.
+    assert_eq!(callback.iterations, [256, 512]);
+    assert!(summary.stopped && !summary.reached_threshold);
+    assert_eq!(summary.num_timesteps, 512);
+    assert_eq!(callback.vector_steps, 256);
+    // Stopped runs end as finished ones do: the final model and the summary are written.
+    assert_eq!(
+        Policy::load(&run.join("final"))
+            .unwrap()
+            .meta()
+            .num_timesteps,
+        512
+    );
+    assert!(run.join("summary.json").is_file());
 }
 
 #[test]
@@ -262,7 +320,7 @@ fn saved_models_load_and_corrupt_or_mismatched_ones_fail_clearly() {
     train(&tiny_config(512), run, |_| {}).unwrap();
     // A run directory means its best model; it acts on raw observations.
     let mut model = Policy::load(run).unwrap();
-    assert_eq!(model.meta().algo, "ppo");
+    assert_eq!(model.meta().algo.algo(), Algo::Ppo);
     assert_eq!(model.env_id(), fairgrasp_rl::env::ENV_ID);
     assert_eq!(model.dir(), Some(run.join("best").as_path()));
     let action = model.act(&vec![0.0; model.obs_dim()], true).unwrap();

@@ -3,6 +3,9 @@
 
 use fairgrasp_render::CameraConfig;
 
+/// A rendered frame: width, height and RGB bytes (row-major).
+pub type RgbFrame = (u32, u32, Vec<u8>);
+
 /// An orbit camera as the page sends it (angles in degrees, lengths in metres).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Orbit {

@@ -2,12 +2,13 @@
 //! the renderer. It lives on its own thread; the HTTP thread sends it [`Request`]s.
 
 use super::camera::Orbit;
+use super::camera::RgbFrame;
 use super::scene_env::SceneEnv;
 use super::twin::TwinView;
 use anyhow::{Context, Result, bail};
 use fairgrasp_env::core::Info;
 use fairgrasp_render::{Camera, Renderer};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
@@ -44,9 +45,6 @@ pub enum Control {
         open: bool,
     },
 }
-
-/// A rendered frame: width, height and RGB bytes (row-major).
-pub type RgbFrame = (u32, u32, Vec<u8>);
 
 /// What the HTTP thread asks; each carries where the answer goes.
 pub enum Request {

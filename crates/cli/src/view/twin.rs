@@ -1,8 +1,7 @@
 //! `--twin ADDR`: the digital twin's arm during a deployment rehearsal. Its joint angles come
 //! over the controller's CNDE stream; a scene of its own is posed at them and rendered.
 
-use super::camera::Orbit;
-use super::session::RgbFrame;
+use super::camera::{Orbit, RgbFrame};
 use anyhow::{Context, Result};
 use fairgrasp_deploy::fairino::cnde::{CndeClient, DEFAULT_PERIOD_MS, default_state_names};
 use fairgrasp_render::{Camera, Renderer};

@@ -10,7 +10,7 @@ pub mod safetensors;
 pub mod spec;
 
 use crate::error::{DeployError, Result};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use spec::PolicySpec;
 use std::path::{Path, PathBuf};
 

@@ -6,8 +6,10 @@ use crate::error::{DeployError, Result};
 use candle_core::Tensor;
 use fairgrasp_env::Env;
 use fairgrasp_env::wrappers::RescaleAction;
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::nn::Activation;
-use fairgrasp_rl::policies::{FeaturesConfig, Policy};
+use fairgrasp_rl::policies::FeaturesConfig;
+pub use fairgrasp_rl::policies::Head;
 
 /// `clip((obs − mean) / sqrt(var + epsilon), ±clip)`, computed in f64 as
 /// [`fairgrasp_env::wrappers::VecNormalizeState::normalize_obs`] does.
@@ -38,16 +40,6 @@ pub struct Dense {
     pub bias: Vec<f32>,
 }
 
-/// What turns the last layer's output into the deterministic action.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Head {
-    /// PPO: the Gaussian's mean, as it is.
-    Mean,
-    /// SAC: the squashed Gaussian's mode, `tanh(mean)`; TD3: its deterministic actor's
-    /// `tanh(output)`, the same graph.
-    TanhMean,
-}
-
 /// The environment's own action box, onto which `[-1, 1]` is mapped (the trainer's
 /// [`RescaleAction`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -61,7 +53,7 @@ pub struct ActionBox {
 pub struct PolicySpec {
     pub env_id: String,
     pub env_config: serde_json::Value,
-    /// `ppo`, `sac` or `td3`.
+    /// The name of the algorithm that trained it.
     pub algo: String,
     pub obs_dim: usize,
     pub act_dim: usize,
@@ -84,45 +76,16 @@ impl PolicySpec {
     pub fn from_policy(policy: &Policy) -> Result<Self> {
         let meta = policy.meta();
         let fail = |message: String| DeployError::config(model_name(policy), message);
-        let (prefix, net_arch, activation, features, head) = match meta.algo.as_str() {
-            "ppo" => {
-                let c = meta
-                    .ppo
-                    .as_ref()
-                    .ok_or_else(|| fail("no ppo settings".into()))?;
-                ("pi", &c.net_arch, c.activation, &c.features, Head::Mean)
-            }
-            "sac" => {
-                let c = meta
-                    .sac
-                    .as_ref()
-                    .ok_or_else(|| fail("no sac settings".into()))?;
-                (
-                    "actor",
-                    &c.net_arch,
-                    c.activation,
-                    &c.features,
-                    Head::TanhMean,
-                )
-            }
-            "td3" => {
-                let c = meta
-                    .td3
-                    .as_ref()
-                    .ok_or_else(|| fail("no td3 settings".into()))?;
-                (
-                    "actor",
-                    &c.net_arch,
-                    c.activation,
-                    &c.features,
-                    Head::TanhMean,
-                )
-            }
-            other => return Err(fail(format!("cannot export algorithm `{other}`"))),
-        };
+        let actor = policy.actor_description();
+        let (prefix, net_arch, activation, head) = (
+            actor.prefix,
+            &actor.net.net_arch,
+            actor.net.activation,
+            actor.head,
+        );
         // The flatten extractor is the identity on flat observations. A new extractor must be
         // added to the exported graph before this match compiles again.
-        match features {
+        match actor.net.features {
             FeaturesConfig::Flatten {} => {}
         }
         let tensors = policy.actor_tensors();
@@ -167,7 +130,7 @@ impl PolicySpec {
         Ok(Self {
             env_id: meta.env_id.clone(),
             env_config: meta.env.clone(),
-            algo: meta.algo.clone(),
+            algo: meta.algo.algo().to_string(),
             obs_dim: meta.obs_dim,
             act_dim: meta.act_dim,
             num_timesteps: meta.num_timesteps,

@@ -20,8 +20,8 @@ pub use grid::{Axis, AxisSpec, Cell, Condition, Grid, Nominal};
 pub use report::{CellResult, CentralSummary, RobustnessReport};
 
 use crate::error::{DeployError, Result};
+use fairgrasp_rl::Policy;
 use fairgrasp_rl::model::{env_table, load_tensors};
-use fairgrasp_rl::policies::Policy;
 use fairgrasp_rl::train::{EvalResult, evaluate};
 use rayon::prelude::*;
 use std::path::Path;
@@ -133,7 +133,7 @@ pub fn evaluate_model(
     Ok(RobustnessReport {
         model: dir.display().to_string(),
         env_id: meta.env_id.clone(),
-        algo: meta.algo.clone(),
+        algo: meta.algo.algo().to_string(),
         trained_steps: meta.num_timesteps,
         trained_randomized,
         episodes_per_cell: options.episodes,

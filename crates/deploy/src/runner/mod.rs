@@ -33,7 +33,7 @@ use crate::fairino::fr5;
 use crate::pose_source::PoseSource;
 use crate::robot::{RobotCommand, RobotLink};
 use crate::safety::{Fault, SafetyConfig, SafetyFilter, Watchdog};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;

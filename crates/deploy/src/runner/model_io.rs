@@ -19,7 +19,7 @@ use fairgrasp_env::sim::envelope::Envelope;
 use fairgrasp_env::sim::kinematics::SerialChain;
 use fairgrasp_env::sim::scene::ArmDrive;
 use fairgrasp_env::wrappers::RescaleAction;
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 
 /// What the deployment loop needs of the model's environment.
 pub struct ModelIo {

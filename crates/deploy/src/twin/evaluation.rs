@@ -11,7 +11,7 @@ use crate::calibration::Calibration;
 use crate::error::Result;
 use crate::robot::{RobotCommand, RobotLink};
 use crate::runner::{DeployOptions, Deployment, JsonLog};
-use fairgrasp_rl::policies::Policy;
+use fairgrasp_rl::Policy;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;

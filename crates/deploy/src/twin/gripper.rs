@@ -12,6 +12,10 @@
 
 use fairgrasp_sim::control::{FINGERS_FULL_SPEED_PERCENT_PER_S, GripperRamp};
 
+/// The `MoveGripper` force % at which the fingers squeeze with the scene's `gripper.force_limit`
+/// (the deployment loop's own setting, so that deployment meets the fingers training saw).
+pub const NOMINAL_FORCE_PERCENT: f64 = 50.0;
+
 /// Position error that counts as arrived (% of the stroke).
 const ARRIVED_PERCENT: f64 = 1.0;
 /// Movement smaller than this (%) over [`STALL_SECONDS`] is a stall (fingers on an object).
@@ -54,7 +58,7 @@ impl Gripper {
             commanded_at: 0.0,
             max_time: f64::INFINITY,
             progress: (0.0, 100.0),
-            force_percent: super::world::NOMINAL_FORCE_PERCENT,
+            force_percent: NOMINAL_FORCE_PERCENT,
             holding: false,
         }
     }

@@ -19,6 +19,7 @@
 //!   used).
 
 use super::controller::{Measured, Setpoint};
+pub use super::gripper::NOMINAL_FORCE_PERCENT;
 use crate::error::{DeployError, Result};
 use fairgrasp_env::arm::{ArmState, ArmWorld};
 use fairgrasp_env::registry;
@@ -50,10 +51,6 @@ pub struct EpisodeResult {
 
 /// Physics steps the contact force is averaged over (one step's solver impulse alone can spike).
 pub const CONTACT_WINDOW: usize = CollisionSensor::WINDOW;
-
-/// The `MoveGripper` force % at which the fingers squeeze with the scene's `gripper.force_limit`
-/// (the deployment loop's own setting, so that deployment meets the fingers training saw).
-pub const NOMINAL_FORCE_PERCENT: f64 = 50.0;
 
 /// The scene, the task, and the judged episode.
 ///

@@ -65,7 +65,7 @@ impl CustomOp2 for AddBias {
         let (_, n) = grad.dims2()?;
         // Column sums, rows in order (the order candle's reduction adds them in).
         let mut sums = vec![0.0f32; n];
-        crate::nn::with_f32_slice(&grad, |g| {
+        crate::kernels::storage::with_f32_slice(&grad, |g| {
             for row in g.chunks_exact(n) {
                 for (s, g) in sums.iter_mut().zip(row) {
                     *s += g;
@@ -96,8 +96,8 @@ impl CustomOp1 for Relu {
     }
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        let out: Vec<f32> = crate::nn::with_f32_slice(arg, |x| {
-            crate::nn::with_f32_slice(grad, |g| {
+        let out: Vec<f32> = crate::kernels::storage::with_f32_slice(arg, |x| {
+            crate::kernels::storage::with_f32_slice(grad, |g| {
                 x.iter()
                     .zip(g)
                     .map(|(&x, &g)| g * if x >= 0.0 { 1.0 } else { 0.0 })

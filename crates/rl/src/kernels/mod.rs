@@ -5,7 +5,8 @@
 //! - [`candle_ops`]: a linear layer's bias add, ReLU and in-place Polyak averaging as single
 //!   candle ops, for the networks that still run through candle's autograd (SAC, TD3);
 //! - [`mlp`]: an MLP's forward and backward passes on plain slices (PPO's networks);
-//! - [`ppo_loss`]: PPO's minibatch loss and its gradient on top of [`mlp`].
+//! - [`ppo_loss`]: PPO's minibatch loss and its gradient on top of [`mlp`];
+//! - [`storage`]: a tensor's values read in place.
 //!
 //! Why by hand: at these networks' sizes candle's per-op allocation and bookkeeping cost more
 //! than the arithmetic (each module says by how much).
@@ -13,4 +14,5 @@
 pub mod candle_ops;
 pub mod mlp;
 pub mod ppo_loss;
+pub mod storage;
 pub mod tanh;

@@ -16,10 +16,8 @@
 use crate::distributions::{HALF_LN_2PI, log_prob_term};
 use crate::error::{Result, RlError};
 use crate::kernels::mlp::{self, LayerParams, MlpBuffers, VarValues, sum};
-use crate::nn::Activation;
-use crate::policies::actor_critic::ActorCritic;
-use crate::policies::features::FeaturesConfig;
-use crate::ppo::PpoConfig;
+use crate::nn::Mlp;
+use candle_core::Tensor;
 use fairgrasp_env::vector::LockstepPool;
 use std::sync::Mutex;
 
@@ -100,14 +98,20 @@ struct ValuePart {
     grad_values: Vec<f32>,
 }
 
-impl FusedPpoLoss {
-    /// Whether `config` is one this computes (otherwise PPO runs its tensor code).
-    pub fn supports(config: &PpoConfig) -> bool {
-        config.activation == Activation::Tanh
-            && config.clip_range_vf.is_none()
-            && config.features == FeaturesConfig::Flatten {}
-    }
+/// The settings of PPO's loss that the computation reads.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossCoefficients {
+    /// The policy ratio is clipped to `1 ± clip_range`.
+    pub clip_range: f32,
+    /// Weight of the entropy bonus.
+    pub ent_coef: f32,
+    /// Weight of the value loss.
+    pub vf_coef: f32,
+    /// Whether advantages are normalised per minibatch.
+    pub normalize_advantage: bool,
+}
 
+impl FusedPpoLoss {
     /// Runs the value head on a second thread when `threads` is 2 or more (the training's
     /// `threads`); the results are the same bits either way.
     pub fn set_threads(&mut self, threads: usize) -> Result<()> {
@@ -129,19 +133,18 @@ impl FusedPpoLoss {
     /// The loss terms of `batch`; the loss's gradient is then [`Self::gradients`].
     pub fn compute(
         &mut self,
-        policy: &ActorCritic,
-        config: &PpoConfig,
+        (pi, vf, log_std): (&Mlp, &Mlp, &Tensor),
+        config: &LossCoefficients,
         batch: &Minibatch<'_>,
     ) -> Result<MinibatchStats> {
-        let act_dim = policy.act_dim;
-        let (pi, vf) = policy.heads();
+        let act_dim = log_std.elem_count();
         let (pi_vars, vf_vars) = (pi.layer_tensors(), vf.layer_tensors());
         let values = VarValues::new(
             pi_vars
                 .iter()
                 .chain(&vf_vars)
                 .flat_map(|(w, b)| [*w, *b])
-                .chain([policy.log_std()]),
+                .chain([log_std]),
         );
         let pi_layers = mlp::layers_from(&values, &pi_vars, 0)?;
         let vf_layers = mlp::layers_from(&values, &vf_vars, 2 * pi_vars.len())?;
@@ -264,7 +267,7 @@ impl PolicyPart {
         pi_layers: &[LayerParams<'_>],
         log_std: &[f32],
         act_dim: usize,
-        config: &PpoConfig,
+        config: &LossCoefficients,
         batch: &Minibatch<'_>,
     ) -> PolicyStats {
         let n = batch.old_log_probs.len();
@@ -414,102 +417,6 @@ impl PolicyPart {
             entropy,
             approx_kl,
             clip_fraction,
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use crate::algorithm::Algorithm;
-    use crate::ppo::{Ppo, PpoConfig};
-    use fairgrasp_env::random::standard_normal;
-    use rand::{Rng, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
-
-    /// A learner with a synthetic rollout (the same for the same seeds); with a privileged
-    /// critic, 4 privileged values per observation.
-    fn learner(config: &PpoConfig, written_out: bool) -> Ppo {
-        let (obs_dim, act_dim, n_envs) = (5, 3, 2);
-        let pd = if config.privileged_critic { 4 } else { 0 };
-        let mut ppo =
-            Ppo::with_privileged(config.clone(), obs_dim, act_dim, pd, n_envs, 4).unwrap();
-        ppo.written_out_loss = written_out;
-        let mut rng = ChaCha8Rng::seed_from_u64(9);
-        let mut obs = vec![0.0f32; n_envs * obs_dim];
-        let mut privileged = vec![0.0f32; n_envs * pd];
-        while !ppo.buffer.is_full() {
-            obs.iter_mut().for_each(|v| *v = standard_normal(&mut rng));
-            privileged
-                .iter_mut()
-                .for_each(|v| *v = standard_normal(&mut rng));
-            let critic_obs: Vec<f32> = (obs.chunks(obs_dim).zip(privileged.chunks(pd.max(1))))
-                .flat_map(|(o, p)| o.iter().chain(&p[..pd]).copied())
-                .collect();
-            let critic = (pd > 0).then_some(critic_obs.as_slice());
-            let out = (ppo.policy)
-                .act_with_critic(&obs, critic, false, &mut ppo.rng)
-                .unwrap();
-            let rewards: Vec<f32> = (0..n_envs).map(|_| rng.random::<f32>()).collect();
-            let starts: Vec<bool> = (0..n_envs).map(|_| rng.random::<f32>() < 0.1).collect();
-            ppo.buffer.push(
-                &obs,
-                &out.actions,
-                &rewards,
-                &starts,
-                &out.values,
-                &out.log_probs,
-                &privileged,
-            );
-        }
-        ppo.buffer
-            .compute_returns_and_advantages(&[0.5, -0.5], &[false, true], 0.9, 0.95);
-        ppo
-    }
-
-    #[test]
-    fn trains_the_same_weights_as_candles_autograd() {
-        let base = PpoConfig {
-            n_steps: 40,
-            batch_size: 16,
-            n_epochs: 3,
-            net_arch: vec![8, 6],
-            ..PpoConfig::default()
-        };
-        let variants = [
-            base.clone(),
-            PpoConfig {
-                ent_coef: 0.0,
-                log_std_init: -0.5,
-                ..base.clone()
-            },
-            PpoConfig {
-                normalize_advantage: false,
-                max_grad_norm: 100.0,
-                clip_range: 0.05,
-                ..base.clone()
-            },
-            PpoConfig {
-                privileged_critic: true,
-                ..base.clone()
-            },
-        ];
-        // One thread, and the value head on a second thread beside the policy's.
-        for (config, threads) in variants.into_iter().flat_map(|c| [(c.clone(), 1), (c, 2)]) {
-            let (mut ours, mut reference) = (learner(&config, true), learner(&config, false));
-            ours.set_update_threads(threads).unwrap();
-            for round in 0..3 {
-                let (a, b) = (ours.update(1.0).unwrap(), reference.update(1.0).unwrap());
-                assert_eq!(
-                    a, b,
-                    "update {round} statistics, {threads} threads, {config:?}"
-                );
-                let (wa, wb) = (ours.weights().unwrap(), reference.weights().unwrap());
-                for (name, t) in &wa {
-                    let x: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
-                    let y: Vec<f32> = wb[name].flatten_all().unwrap().to_vec1().unwrap();
-                    assert_eq!(x, y, "`{name}` after update {round}, {threads} threads");
-                }
-            }
         }
     }
 }

@@ -7,16 +7,19 @@
 //!
 //! [`Info::privileged`]: fairgrasp_env::Info::privileged
 
+use crate::algorithm::{TensorMap, varmap_tensors};
 use crate::distributions::{DiagGaussian, log_prob_term, standard_normal_tensor};
 use crate::error::{Result, RlError};
 use crate::kernels::mlp;
 use crate::nn::{Activation, Mlp};
+use crate::policies::actor::{ActorDescription, ActorNet, Head};
 use crate::policies::features::{FeaturesConfig, FeaturesExtractor};
-use crate::ppo::PpoConfig;
+use crate::policies::net_config::NetConfig;
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use fairgrasp_env::random::standard_normal;
 use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 
 /// Output-layer gains (see [`Mlp::new`]): small for the policy means, so the first actions are
 /// near zero (as CleanRL does), ordinary for the value.
@@ -41,6 +44,8 @@ pub struct ActorCritic {
     /// Whether acting runs the networks written out ([`crate::kernels::mlp`]: tanh layers on flat
     /// observations) instead of through candle tensors.
     written_out: bool,
+    /// The shape it was built with.
+    net_config: NetConfig,
 }
 
 /// What the policy decided for a batch of observations.
@@ -58,22 +63,24 @@ impl ActorCritic {
         obs_dim: usize,
         act_dim: usize,
         privileged_dim: usize,
-        config: &PpoConfig,
+        config: &NetConfig,
+        log_std_init: f32,
         rng: &mut impl Rng,
     ) -> Result<Self> {
-        let policy = Self::zeroed(obs_dim, act_dim, privileged_dim, config)?;
+        let policy = Self::zeroed(obs_dim, act_dim, privileged_dim, config, log_std_init)?;
         policy.features.init_weights(&policy.varmap, rng)?;
         policy.pi.init_weights(&policy.varmap, rng)?;
         policy.vf.init_weights(&policy.varmap, rng)?;
         Ok(policy)
     }
 
-    /// The networks with zero weights (`log_std` at its initial value), to load weights into.
+    /// The networks with zero weights (`log_std` at `log_std_init`), to load weights into.
     pub fn zeroed(
         obs_dim: usize,
         act_dim: usize,
         privileged_dim: usize,
-        config: &PpoConfig,
+        config: &NetConfig,
+        log_std_init: f32,
     ) -> Result<Self> {
         if privileged_dim > 0 && config.features != (FeaturesConfig::Flatten {}) {
             return Err(RlError::Other(
@@ -92,7 +99,7 @@ impl ActorCritic {
         vb.get_with_hints(
             act_dim,
             "log_std",
-            candle_nn::Init::Const(config.log_std_init as f64),
+            candle_nn::Init::Const(log_std_init as f64),
         )?;
         let log_std = varmap
             .data()
@@ -113,6 +120,7 @@ impl ActorCritic {
             device,
             written_out: config.activation == Activation::Tanh
                 && config.features == FeaturesConfig::Flatten {},
+            net_config: config.clone(),
         })
     }
 
@@ -121,7 +129,7 @@ impl ActorCritic {
         obs_tensor(obs, self.obs_dim, &self.device)
     }
 
-    /// The policy and value networks (for [`crate::kernels::ppo_loss`], which runs them written out).
+    /// The policy and value networks (for PPO's loss written out, [`crate::kernels::ppo_loss`]).
     pub(crate) fn heads(&self) -> (&Mlp, &Mlp) {
         (&self.pi, &self.vf)
     }
@@ -251,7 +259,7 @@ impl ActorCritic {
     }
 
     /// Actions only (no value pass): what [`Self::act`] would take, drawing the same noise.
-    /// The trainer's evaluation and [`crate::policies::Policy`] both act through this.
+    /// The trainer's evaluation and [`crate::Policy`] both act through this.
     pub fn predict(
         &self,
         obs: &[f32],
@@ -323,6 +331,24 @@ fn rows_of(values: &[f32], dim: usize) -> Result<usize> {
     Ok(values.len() / dim)
 }
 
+impl ActorNet for ActorCritic {
+    fn act(&self, obs: &[f32], deterministic: bool, rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        self.predict(obs, deterministic, rng)
+    }
+
+    fn tensors(&self) -> TensorMap {
+        varmap_tensors(&self.varmap, "")
+    }
+
+    fn description(&self) -> ActorDescription {
+        ActorDescription {
+            prefix: "pi",
+            net: self.net_config.clone(),
+            head: Head::Mean,
+        }
+    }
+}
+
 /// `obs` as a `batch × obs_dim` tensor; errors unless it holds whole observations.
 pub(crate) fn obs_tensor(obs: &[f32], obs_dim: usize, device: &Device) -> Result<Tensor> {
     if obs.is_empty() || obs_dim == 0 || !obs.len().is_multiple_of(obs_dim) {
@@ -345,18 +371,18 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
-    fn config() -> PpoConfig {
-        PpoConfig {
+    fn config() -> NetConfig {
+        NetConfig {
             net_arch: vec![8, 8],
-            log_std_init: -0.5,
-            ..PpoConfig::default()
+            activation: Activation::Tanh,
+            features: FeaturesConfig::Flatten {},
         }
     }
 
     #[test]
     fn parameter_names_are_those_of_saved_models() {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
-        let policy = ActorCritic::new(4, 2, 0, &config(), &mut rng).unwrap();
+        let policy = ActorCritic::new(4, 2, 0, &config(), -0.5, &mut rng).unwrap();
         let mut names: Vec<String> = varmap_tensors(&policy.varmap, "").into_keys().collect();
         names.sort();
         let mut want: Vec<String> = ["pi", "vf"]
@@ -373,7 +399,7 @@ mod tests {
     #[test]
     fn act_samples_around_the_mean_and_predict_draws_the_same_noise() {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let policy = ActorCritic::new(4, 2, 0, &config(), &mut rng).unwrap();
+        let policy = ActorCritic::new(4, 2, 0, &config(), -0.5, &mut rng).unwrap();
         let obs = [0.5f32, -1.0, 0.25, 2.0, 0.0, 0.1, -0.3, 1.0];
         let mean = policy.predict(&obs, true, &mut rng).unwrap();
         let det = policy.act(&obs, true, &mut rng).unwrap();
@@ -405,7 +431,7 @@ mod tests {
     #[test]
     fn a_privileged_critic_s_values_read_the_privileged_state_and_the_actions_never_do() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let mut policy = ActorCritic::new(4, 2, 3, &config(), &mut rng).unwrap();
+        let mut policy = ActorCritic::new(4, 2, 3, &config(), -0.5, &mut rng).unwrap();
         let weights = varmap_tensors(&policy.varmap, "");
         assert_eq!(weights["pi.l0.weight"].dims(), [8, 4]);
         assert_eq!(weights["vf.l0.weight"].dims(), [8, 7]);
@@ -437,7 +463,7 @@ mod tests {
     #[test]
     fn acting_written_out_matches_candle_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let mut policy = ActorCritic::new(4, 2, 0, &config(), &mut rng).unwrap();
+        let mut policy = ActorCritic::new(4, 2, 0, &config(), -0.5, &mut rng).unwrap();
         let obs: Vec<f32> = (0..12).map(|i| (i as f32 * 0.37).sin() * 2.0).collect();
         let run = |policy: &ActorCritic, deterministic: bool| {
             let mut rng = ChaCha8Rng::seed_from_u64(11);

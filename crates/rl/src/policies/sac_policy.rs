@@ -5,16 +5,19 @@
 //! Parameters: `actor.*`, `critic.qf1.*`, `critic.qf2.*`, `critic_target.*` (and
 //! `actor.features.*`, `critic.features.*` for an extractor with parameters).
 
+use crate::algorithm::{TensorMap, varmap_tensors};
 use crate::distributions::{SquashedDiagGaussian, standard_normal_tensor};
 use crate::error::Result;
 use crate::nn::Mlp;
+use crate::policies::actor::{ActorDescription, ActorNet, Head};
 use crate::policies::actor_critic::obs_tensor;
 use crate::policies::critics::{CriticsWithTarget, critics_with_target};
 use crate::policies::features::FeaturesExtractor;
-use crate::sac::SacConfig;
+use crate::policies::net_config::NetConfig;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 
 /// The actor's log standard deviation is squashed into this range (CleanRL's bounds).
 const LOG_STD_MIN: f64 = -5.0;
@@ -38,11 +41,13 @@ pub struct SacActor {
     net: Mlp,
     obs_dim: usize,
     act_dim: usize,
+    /// The shape it was built with.
+    net_config: NetConfig,
 }
 
 impl SacActor {
     /// The actor with zero weights (see [`Self::init_weights`]).
-    fn zeroed(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
+    fn zeroed(obs_dim: usize, act_dim: usize, config: &NetConfig) -> Result<Self> {
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp("actor");
         let features = config.features.build(&vb.pp("features"), obs_dim)?;
@@ -60,6 +65,7 @@ impl SacActor {
             net,
             obs_dim,
             act_dim,
+            net_config: config.clone(),
         })
     }
 
@@ -79,7 +85,7 @@ impl SacActor {
 
     /// Actions for a batch of observations (row-major): `tanh(μ)` when `deterministic`, else a
     /// sample with `act_dim` standard normal draws per observation from `rng`. SAC's
-    /// `predict`, its evaluation and [`crate::policies::Policy`] all act through this.
+    /// `predict`, its evaluation and [`crate::Policy`] all act through this.
     pub fn predict(
         &self,
         obs: &[f32],
@@ -98,6 +104,24 @@ impl SacActor {
     }
 }
 
+impl ActorNet for SacActor {
+    fn act(&self, obs: &[f32], deterministic: bool, rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        self.predict(obs, deterministic, rng)
+    }
+
+    fn tensors(&self) -> TensorMap {
+        varmap_tensors(&self.varmap, "")
+    }
+
+    fn description(&self) -> ActorDescription {
+        ActorDescription {
+            prefix: "actor",
+            net: self.net_config.clone(),
+            head: Head::TanhMean,
+        }
+    }
+}
+
 /// The actor, the critics and the target critics.
 pub struct SacPolicy {
     pub actor: SacActor,
@@ -106,7 +130,7 @@ pub struct SacPolicy {
 
 impl SacPolicy {
     /// The networks with zero weights (see [`Self::init_weights`]).
-    pub fn zeroed(obs_dim: usize, act_dim: usize, config: &SacConfig) -> Result<Self> {
+    pub fn zeroed(obs_dim: usize, act_dim: usize, config: &NetConfig) -> Result<Self> {
         let actor = SacActor::zeroed(obs_dim, act_dim, config)?;
         let critics = critics_with_target(
             obs_dim,

@@ -3,15 +3,18 @@
 //!
 //! Parameters: `actor.*`, `actor_target.*`, `critic.qf1.*`, `critic.qf2.*`, `critic_target.*`.
 
+use crate::algorithm::{TensorMap, varmap_tensors};
 use crate::error::Result;
 use crate::nn::Mlp;
+use crate::policies::actor::{ActorDescription, ActorNet, Head};
 use crate::policies::actor_critic::obs_tensor;
 use crate::policies::critics::{CriticsWithTarget, TargetPairs, critics_with_target};
 use crate::policies::features::FeaturesExtractor;
-use crate::td3::Td3Config;
+use crate::policies::net_config::NetConfig;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 
 /// Output-layer gain of the actor (see [`Mlp::new`]): small, so the first actions are near zero
 /// and the exploration noise decides them, as with SAC's actor.
@@ -26,11 +29,21 @@ pub struct Td3Actor {
     act_dim: usize,
     /// σ of the Gaussian exploration noise of stochastic actions.
     action_noise: f32,
+    /// The shape it was built with.
+    net_config: NetConfig,
+    /// Name prefix of its parameters (`actor`, `actor_target`).
+    prefix: &'static str,
 }
 
 impl Td3Actor {
     /// The actor with zero weights, parameters named `{prefix}.…`.
-    fn zeroed(prefix: &str, obs_dim: usize, act_dim: usize, config: &Td3Config) -> Result<Self> {
+    fn zeroed(
+        prefix: &'static str,
+        obs_dim: usize,
+        act_dim: usize,
+        config: &NetConfig,
+        action_noise: f32,
+    ) -> Result<Self> {
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu).pp(prefix);
         let features = config.features.build(&vb.pp("features"), obs_dim)?;
@@ -48,7 +61,9 @@ impl Td3Actor {
             net,
             obs_dim,
             act_dim,
-            action_noise: config.action_noise,
+            action_noise,
+            net_config: config.clone(),
+            prefix,
         })
     }
 
@@ -65,7 +80,7 @@ impl Td3Actor {
 
     /// Actions for a batch of observations (row-major): the policy's when `deterministic`,
     /// else with N(0, `action_noise`²) noise from `rng` added and clipped to `[-1, 1]` (TD3's
-    /// exploration). TD3's `predict`, its evaluation and [`crate::policies::Policy`] act
+    /// exploration). TD3's `predict`, its evaluation and [`crate::Policy`] act
     /// through this.
     pub fn predict(
         &self,
@@ -89,6 +104,24 @@ impl Td3Actor {
     }
 }
 
+impl ActorNet for Td3Actor {
+    fn act(&self, obs: &[f32], deterministic: bool, rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        self.predict(obs, deterministic, rng)
+    }
+
+    fn tensors(&self) -> TensorMap {
+        varmap_tensors(&self.varmap, "")
+    }
+
+    fn description(&self) -> ActorDescription {
+        ActorDescription {
+            prefix: self.prefix,
+            net: self.net_config.clone(),
+            head: Head::TanhMean,
+        }
+    }
+}
+
 /// The actor, the critics and the targets of both.
 pub struct Td3Policy {
     pub actor: Td3Actor,
@@ -98,10 +131,17 @@ pub struct Td3Policy {
 }
 
 impl Td3Policy {
-    /// The networks with zero weights (see [`Self::init_weights`]).
-    pub fn zeroed(obs_dim: usize, act_dim: usize, config: &Td3Config) -> Result<Self> {
-        let actor = Td3Actor::zeroed("actor", obs_dim, act_dim, config)?;
-        let actor_target = Td3Actor::zeroed("actor_target", obs_dim, act_dim, config)?;
+    /// The networks with zero weights (see [`Self::init_weights`]); stochastic actions add
+    /// Gaussian noise of σ `action_noise`.
+    pub fn zeroed(
+        obs_dim: usize,
+        act_dim: usize,
+        config: &NetConfig,
+        action_noise: f32,
+    ) -> Result<Self> {
+        let actor = Td3Actor::zeroed("actor", obs_dim, act_dim, config, action_noise)?;
+        let actor_target =
+            Td3Actor::zeroed("actor_target", obs_dim, act_dim, config, action_noise)?;
         let critics = critics_with_target(
             obs_dim,
             act_dim,

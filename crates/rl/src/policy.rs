@@ -1,24 +1,18 @@
 //! [`Policy`]: a saved model acting on raw observations, without its learner (no optimiser,
-//! no replay buffer, no critics).
+//! no replay buffer, no critics). It sits above the algorithms: the model's [`AlgoConfig`] says
+//! how its actor loads ([`AlgoConfig::load_actor`]), and the actor is then any
+//! [`ActorNet`].
 
-use crate::algorithm::{TensorMap, load_varmap, varmap_tensors};
+#[cfg(doc)]
+use crate::algo::AlgoConfig;
+use crate::algorithm::TensorMap;
 use crate::error::{Result, RlError};
 use crate::model::{ModelMeta, load_tensors, resolve_model_dir};
-use crate::policies::actor_critic::ActorCritic;
-use crate::policies::sac_policy::SacActor;
-use crate::policies::td3_policy::Td3Actor;
-use crate::sac::Networks as SacNetworks;
+use crate::policies::{ActorDescription, ActorNet};
 use fairgrasp_env::wrappers::VecNormalizeState;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::{Path, PathBuf};
-
-/// The networks that choose actions.
-enum Actor {
-    Ppo(ActorCritic),
-    Sac(SacActor),
-    Td3(Td3Actor),
-}
 
 /// A trained policy: the model's networks and observation statistics. It gives exactly the
 /// actions of the learner it was saved from (the algorithms predict through the same
@@ -27,7 +21,7 @@ pub struct Policy {
     meta: ModelMeta,
     /// The model directory it was read from (none when built from parts).
     dir: Option<PathBuf>,
-    actor: Actor,
+    actor: Box<dyn ActorNet>,
     normalization: Option<VecNormalizeState>,
     /// The stream of stochastic actions' noise.
     rng: ChaCha8Rng,
@@ -57,39 +51,9 @@ impl Policy {
                 meta.obs_dim, meta.act_dim
             )));
         }
-        let missing = |algo: &str| {
-            RlError::Model(format!(
-                "model.json names algorithm {algo} but has no `{algo}` settings"
-            ))
-        };
-        let weights_error = |e: RlError| RlError::Model(format!("model.safetensors: {e}"));
-        let actor = match meta.algo.as_str() {
-            "ppo" => {
-                let config = meta.ppo.as_ref().ok_or_else(|| missing("ppo"))?;
-                let policy =
-                    ActorCritic::zeroed(meta.obs_dim, meta.act_dim, meta.privileged_dim, config)?;
-                load_varmap(&policy.varmap, weights).map_err(weights_error)?;
-                Actor::Ppo(policy)
-            }
-            "sac" => {
-                let config = meta.sac.as_ref().ok_or_else(|| missing("sac"))?;
-                let nets = SacNetworks::zeroed(meta.obs_dim, meta.act_dim, config)?;
-                nets.load_weights(weights, meta.obs_dim, meta.act_dim, config)
-                    .map_err(weights_error)?;
-                Actor::Sac(nets.into_actor())
-            }
-            "td3" => {
-                let config = meta.td3.as_ref().ok_or_else(|| missing("td3"))?;
-                let actor = crate::td3::load_actor(weights, meta.obs_dim, meta.act_dim, config)
-                    .map_err(weights_error)?;
-                Actor::Td3(actor)
-            }
-            other => {
-                return Err(RlError::Model(format!(
-                    "model.json: unknown algorithm `{other}` (expected ppo, sac or td3)"
-                )));
-            }
-        };
+        let actor = (meta.algo)
+            .load_actor(weights, meta.obs_dim, meta.act_dim, meta.privileged_dim)
+            .map_err(|e| RlError::Model(format!("model.safetensors: {e}")))?;
         let normalization = match &meta.normalization {
             Some(json) => Some(VecNormalizeState::from_json(json).map_err(|p| {
                 RlError::Model(format!("model.json: normalisation statistics: {p}"))
@@ -164,11 +128,7 @@ impl Policy {
             }
             None => obs,
         };
-        match &self.actor {
-            Actor::Ppo(policy) => policy.predict(input, deterministic, &mut self.rng),
-            Actor::Sac(actor) => actor.predict(input, deterministic, &mut self.rng),
-            Actor::Td3(actor) => actor.predict(input, deterministic, &mut self.rng),
-        }
+        self.actor.act(input, deterministic, &mut self.rng)
     }
 
     /// Restarts the stream of stochastic actions from `seed`.
@@ -182,15 +142,15 @@ impl Policy {
         self.normalization.as_ref()
     }
 
-    /// The parameters of the networks that act, by their names in `model.safetensors` (PPO:
-    /// `pi.*`, `vf.*` and `log_std`; SAC: `actor.*`), for exporters that rebuild the actor
-    /// elsewhere.
+    /// The parameters of the network that acts, by their names in `model.safetensors`, for
+    /// exporters that rebuild the actor elsewhere (see [`Self::actor_description`]).
     pub fn actor_tensors(&self) -> TensorMap {
-        match &self.actor {
-            Actor::Ppo(policy) => varmap_tensors(&policy.varmap, ""),
-            Actor::Sac(actor) => varmap_tensors(&actor.varmap, ""),
-            Actor::Td3(actor) => varmap_tensors(&actor.varmap, ""),
-        }
+        self.actor.tensors()
+    }
+
+    /// Which of [`Self::actor_tensors`] make the actor's layers, and its activation and head.
+    pub fn actor_description(&self) -> ActorDescription {
+        self.actor.description()
     }
 
     /// The model's description (`model.json`).
