@@ -21,6 +21,11 @@ pub fn standard_normal_f64(rng: &mut impl Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
+/// A draw uniform in `[range[0], range[1])`.
+pub fn uniform(rng: &mut impl Rng, range: [f32; 2]) -> f32 {
+    range[0] + (range[1] - range[0]) * rng.random::<f32>()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -20,6 +20,7 @@ pub mod gripper;
 pub mod observation;
 pub mod readings;
 pub mod servo;
+pub mod shapes;
 pub mod state;
 
 pub use config::{
@@ -37,6 +38,7 @@ pub use state::{ArmState, ObjectReading};
 
 use crate::core::{Env, EpisodeEvent, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::{EnvError, Result};
+use crate::random::uniform;
 use crate::spaces::BoxSpace;
 use fairgrasp_render::Renderer;
 use fairgrasp_sim::SimError;
@@ -263,10 +265,6 @@ fn write_observation<T: Task>(
     }
 }
 
-pub(crate) fn uniform(rng: &mut impl Rng, range: [f32; 2]) -> f32 {
-    range[0] + (range[1] - range[0]) * rng.random::<f32>()
-}
-
 impl<T: Task> ArmEnv<T> {
     /// Builds the environment. Call [`Env::reset`] before stepping.
     pub fn new(config: ArmEnvConfig<T::Settings, T::Reward>) -> Result<Self> {
@@ -453,7 +451,7 @@ impl<T: Task> ArmEnv<T> {
             // As configured (before shape randomisation and scaling).
             let nominal = self.scene.config().objects[i].clone();
             let mut shape = if self.config.shapes.enabled {
-                crate::tasks::shapes::draw(&self.config.shapes, &mut self.rng)
+                crate::arm::shapes::draw(&self.config.shapes, &mut self.rng)
             } else {
                 nominal.shape
             };
@@ -461,8 +459,7 @@ impl<T: Task> ArmEnv<T> {
             if d.enabled {
                 mass = uniform(&mut self.rng, d.object_mass);
                 friction = uniform(&mut self.rng, d.object_friction);
-                shape =
-                    crate::tasks::shapes::scaled(&shape, uniform(&mut self.rng, d.object_scale));
+                shape = crate::arm::shapes::scaled(&shape, uniform(&mut self.rng, d.object_scale));
             }
             if d.enabled || self.config.shapes.enabled {
                 report.set(format!("param/object{i}_mass"), mass);

@@ -4,7 +4,6 @@
 pub mod classic;
 pub mod grasp;
 pub mod pick_place;
-pub mod shapes;
 pub mod sort;
 
 pub use grasp::GraspFlags;
