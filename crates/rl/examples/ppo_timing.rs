@@ -9,7 +9,7 @@
 //! ```
 //!
 //! `PPO_TIMING_AUTOGRAD=1` runs the update through candle's autograd instead of the loss
-//! written out (`fairgrasp_rl::kernels::ppo_loss`).
+//! written out (`fairgrasp_rl::ppo::fused_loss`).
 
 use fairgrasp_env::random::standard_normal;
 use fairgrasp_rl::algorithm::Algorithm;

@@ -22,7 +22,7 @@ use crate::nn::{Activation, Adam};
 use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::net_config::NetConfig;
-use crate::policies::sac_policy::{SacActor, SacPolicy};
+use crate::policies::squashed_gaussian::{SquashedGaussianActor, SquashedGaussianPolicy};
 use candle_core::{DType, Device, Var};
 use candle_nn::{VarBuilder, VarMap};
 use fairgrasp_env::{VecStep, VectorEnv};
@@ -112,7 +112,7 @@ pub(crate) fn validate(c: &SacConfig, _n_envs: usize) -> Result<()> {
 /// prefix (`actor.`, `critic.`, `critic_target.`, `log_alpha`), so saved weights and errors
 /// name tensors unambiguously.
 pub(crate) struct Networks {
-    pub(crate) policy: SacPolicy,
+    pub(crate) policy: SquashedGaussianPolicy,
     /// log α, when it is learnt (`ent_coef = None`).
     log_alpha: Option<(VarMap, Var)>,
 }
@@ -132,7 +132,7 @@ impl Networks {
             }
         };
         Ok(Self {
-            policy: SacPolicy::zeroed(obs_dim, act_dim, &config.net())?,
+            policy: SquashedGaussianPolicy::zeroed(obs_dim, act_dim, &config.net())?,
             log_alpha,
         })
     }
@@ -169,7 +169,7 @@ impl Networks {
     }
 
     /// The actor alone (for acting).
-    pub(crate) fn into_actor(self) -> SacActor {
+    pub(crate) fn into_actor(self) -> SquashedGaussianActor {
         self.policy.actor
     }
 }
@@ -181,7 +181,7 @@ pub(crate) fn load_actor(
     obs_dim: usize,
     act_dim: usize,
     config: &SacConfig,
-) -> Result<SacActor> {
+) -> Result<SquashedGaussianActor> {
     let nets = Networks::zeroed(obs_dim, act_dim, config)?;
     nets.load_weights(weights, obs_dim, act_dim, config)?;
     Ok(nets.into_actor())

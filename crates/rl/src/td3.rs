@@ -17,9 +17,9 @@ use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
 use crate::error::{ConfigSection, Result};
 use crate::nn::{Activation, Adam};
 use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
+use crate::policies::deterministic::{DeterministicActor, DeterministicPolicy};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::net_config::NetConfig;
-use crate::policies::td3_policy::{Td3Actor, Td3Policy};
 use candle_core::Tensor;
 use fairgrasp_env::{VecStep, VectorEnv};
 use rand_chacha::ChaCha8Rng;
@@ -108,9 +108,10 @@ pub(crate) fn load_actor(
     obs_dim: usize,
     act_dim: usize,
     config: &Td3Config,
-) -> Result<Td3Actor> {
-    let policy = Td3Policy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
-    let scratch = Td3Policy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
+) -> Result<DeterministicActor> {
+    let policy = DeterministicPolicy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
+    let scratch =
+        DeterministicPolicy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
     load_grouped(&policy.groups(), &scratch.groups(), weights)?;
     Ok(policy.actor)
 }
@@ -119,7 +120,7 @@ pub(crate) fn load_actor(
 /// random stream, learn loop).
 pub struct Td3 {
     pub config: Td3Config,
-    policy: Td3Policy,
+    policy: DeterministicPolicy,
     actor_opt: Adam,
     critic_opt: Adam,
     core: OffPolicyCore,
@@ -135,7 +136,8 @@ impl Td3 {
     ) -> Result<Self> {
         validate(&config, n_envs)?;
         let mut core = OffPolicyCore::new("td3", loop_settings!(config), obs_dim, act_dim, seed)?;
-        let policy = Td3Policy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
+        let policy =
+            DeterministicPolicy::zeroed(obs_dim, act_dim, &config.net(), config.action_noise)?;
         policy.init_weights(&mut core.rng)?;
         let lr = config.learning_rate;
         Ok(Self {
@@ -284,7 +286,7 @@ impl Algorithm for Td3 {
     }
 
     fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
-        let scratch = Td3Policy::zeroed(
+        let scratch = DeterministicPolicy::zeroed(
             self.core.obs_dim,
             self.core.act_dim,
             &self.config.net(),

@@ -5,7 +5,7 @@
 //! through candle's autograd ran a few hundred tensor operations, each allocating its result
 //! and costing microseconds whatever its size: ~1 ms of CPU per minibatch step, of which the
 //! arithmetic is a small part. Here the same arithmetic runs on reused buffers (0.3 ms, with
-//! [`crate::kernels::ppo_loss`]).
+//! [`crate::ppo::fused_loss`]).
 //!
 //! The results are bit-identical to candle's: the matrix products call the same `gemm` routine
 //! with the same shapes, strides and threading as candle's CPU backend does for `Linear`

@@ -4,8 +4,8 @@
 //! - [`tanh`]: a vectorised tanh (candle's called libm once per value);
 //! - [`candle_ops`]: a linear layer's bias add, ReLU and in-place Polyak averaging as single
 //!   candle ops, for the networks that still run through candle's autograd (SAC, TD3);
-//! - [`mlp`]: an MLP's forward and backward passes on plain slices (PPO's networks);
-//! - [`ppo_loss`]: PPO's minibatch loss and its gradient on top of [`mlp`];
+//! - [`mlp`]: an MLP's forward and backward passes on plain slices (PPO's networks, and its
+//!   loss written out in [`crate::ppo::fused_loss`]);
 //! - [`storage`]: a tensor's values read in place.
 //!
 //! Why by hand: at these networks' sizes candle's per-op allocation and bookkeeping cost more
@@ -13,6 +13,5 @@
 
 pub mod candle_ops;
 pub mod mlp;
-pub mod ppo_loss;
 pub mod storage;
 pub mod tanh;

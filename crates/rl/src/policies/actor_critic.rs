@@ -129,7 +129,7 @@ impl ActorCritic {
         obs_tensor(obs, self.obs_dim, &self.device)
     }
 
-    /// The policy and value networks (for PPO's loss written out, [`crate::kernels::ppo_loss`]).
+    /// The policy and value networks (for PPO's loss written out, [`crate::ppo::fused_loss`]).
     pub(crate) fn heads(&self) -> (&Mlp, &Mlp) {
         (&self.pi, &self.vf)
     }

@@ -5,23 +5,23 @@
 //! - [`net_config`]: [`NetConfig`], hidden layers, activation and feature extractor;
 //! - [`features`]: the feature-extractor seam ([`features::FeaturesConfig`], `flatten` today);
 //! - [`actor`]: [`ActorNet`], the acting network of any trained policy, and how it exports;
-//! - [`actor_critic`]: PPO's Gaussian policy and value network;
-//! - [`critics`]: the twin critics and Polyak-averaged targets SAC and TD3 share;
-//! - [`sac_policy`]: SAC's squashed Gaussian actor with its critics;
-//! - [`td3_policy`]: TD3's deterministic actor with its critics and targets.
+//! - [`actor_critic`]: a Gaussian policy and its value network (PPO's);
+//! - [`critics`]: twin Q critics and their Polyak-averaged targets;
+//! - [`squashed_gaussian`]: a tanh-squashed Gaussian actor with twin critics (SAC's);
+//! - [`deterministic`]: a deterministic actor with twin critics and a target actor (TD3's).
 
 pub mod actor;
 pub mod actor_critic;
 pub mod critics;
+pub mod deterministic;
 pub mod features;
 pub mod net_config;
-pub mod sac_policy;
-pub mod td3_policy;
+pub mod squashed_gaussian;
 
 pub use actor::{ActorDescription, ActorNet, Head};
 pub use actor_critic::{ActorCritic, PolicyOutput};
 pub use critics::{CriticsWithTarget, TargetPairs, TwinCritics};
+pub use deterministic::{DeterministicActor, DeterministicPolicy};
 pub use features::{FeaturesConfig, FeaturesExtractor, FlattenExtractor};
 pub use net_config::NetConfig;
-pub use sac_policy::{SacActor, SacPolicy};
-pub use td3_policy::{Td3Actor, Td3Policy};
+pub use squashed_gaussian::{SquashedGaussianActor, SquashedGaussianPolicy};

@@ -11,7 +11,7 @@
 //! `VecOps::vec_reduce_sum` ([`mlp::sum`]), `x · c` as `x · (c as f32) + 0`, the gradients of `minimum`,
 //! `maximum` and the broadcasts by candle's rules, and the log standard deviation's three
 //! gradient contributions accumulated in candle's order. So the weights it trains are
-//! bit-identical to the tensor code's (tested below and on whole training runs).
+//! bit-identical to the tensor code's (tested in [`crate::ppo`] and on whole training runs).
 
 use crate::distributions::{HALF_LN_2PI, log_prob_term};
 use crate::error::{Result, RlError};

@@ -10,18 +10,20 @@
 //! (asymmetric actor-critic, Pinto et al. 2018), normalised by running statistics as
 //! `VecNormalize` normalises observations; the policy reads the observation alone.
 
+pub mod fused_loss;
+
 use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,
 };
 use crate::buffers::RolloutBuffer;
 use crate::error::{ConfigSection, Result, RlError};
-use crate::kernels::ppo_loss::{FusedPpoLoss, LossCoefficients, Minibatch, MinibatchStats};
 use crate::nn::{Activation, Adam};
 use crate::policies::actor_critic::ActorCritic;
 use crate::policies::features::FeaturesConfig;
 use crate::policies::net_config::NetConfig;
 use candle_core::{DType, Device, Tensor};
 use fairgrasp_env::{Info, RunningMeanStd, VecStep, VectorEnv};
+use fused_loss::{FusedPpoLoss, LossCoefficients, Minibatch, MinibatchStats};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -152,7 +154,7 @@ pub struct Ppo {
     /// Whether each environment's current observation starts an episode (SB3's
     /// `_last_episode_starts`).
     episode_starts: Vec<bool>,
-    /// Whether updates run the loss written out ([`crate::kernels::ppo_loss`]) where it supports the
+    /// Whether updates run the loss written out ([`crate::ppo::fused_loss`]) where it supports the
     /// configuration; off, candle's autograd computes the same weights, slower.
     pub written_out_loss: bool,
     fused: FusedPpoLoss,

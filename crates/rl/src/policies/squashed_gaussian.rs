@@ -35,7 +35,7 @@ fn squash_log_std(raw: &Tensor) -> candle_core::Result<Tensor> {
 
 /// The squashed Gaussian policy: one MLP on the features gives each action dimension's mean and
 /// log std.
-pub struct SacActor {
+pub struct SquashedGaussianActor {
     pub varmap: VarMap,
     features: Box<dyn FeaturesExtractor>,
     net: Mlp,
@@ -45,7 +45,7 @@ pub struct SacActor {
     net_config: NetConfig,
 }
 
-impl SacActor {
+impl SquashedGaussianActor {
     /// The actor with zero weights (see [`Self::init_weights`]).
     fn zeroed(obs_dim: usize, act_dim: usize, config: &NetConfig) -> Result<Self> {
         let varmap = VarMap::new();
@@ -104,7 +104,7 @@ impl SacActor {
     }
 }
 
-impl ActorNet for SacActor {
+impl ActorNet for SquashedGaussianActor {
     fn act(&self, obs: &[f32], deterministic: bool, rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
         self.predict(obs, deterministic, rng)
     }
@@ -123,15 +123,15 @@ impl ActorNet for SacActor {
 }
 
 /// The actor, the critics and the target critics.
-pub struct SacPolicy {
-    pub actor: SacActor,
+pub struct SquashedGaussianPolicy {
+    pub actor: SquashedGaussianActor,
     pub critics: CriticsWithTarget,
 }
 
-impl SacPolicy {
+impl SquashedGaussianPolicy {
     /// The networks with zero weights (see [`Self::init_weights`]).
     pub fn zeroed(obs_dim: usize, act_dim: usize, config: &NetConfig) -> Result<Self> {
-        let actor = SacActor::zeroed(obs_dim, act_dim, config)?;
+        let actor = SquashedGaussianActor::zeroed(obs_dim, act_dim, config)?;
         let critics = critics_with_target(
             obs_dim,
             act_dim,

@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 const ACTOR_OUTPUT_GAIN: f64 = 0.01;
 
 /// The deterministic policy `a = tanh(MLP(features(s)))`.
-pub struct Td3Actor {
+pub struct DeterministicActor {
     pub varmap: VarMap,
     features: Box<dyn FeaturesExtractor>,
     net: Mlp,
@@ -35,7 +35,7 @@ pub struct Td3Actor {
     prefix: &'static str,
 }
 
-impl Td3Actor {
+impl DeterministicActor {
     /// The actor with zero weights, parameters named `{prefix}.…`.
     fn zeroed(
         prefix: &'static str,
@@ -104,7 +104,7 @@ impl Td3Actor {
     }
 }
 
-impl ActorNet for Td3Actor {
+impl ActorNet for DeterministicActor {
     fn act(&self, obs: &[f32], deterministic: bool, rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
         self.predict(obs, deterministic, rng)
     }
@@ -123,14 +123,14 @@ impl ActorNet for Td3Actor {
 }
 
 /// The actor, the critics and the targets of both.
-pub struct Td3Policy {
-    pub actor: Td3Actor,
-    pub actor_target: Td3Actor,
+pub struct DeterministicPolicy {
+    pub actor: DeterministicActor,
+    pub actor_target: DeterministicActor,
     pub critics: CriticsWithTarget,
     pub(crate) actor_pairs: TargetPairs,
 }
 
-impl Td3Policy {
+impl DeterministicPolicy {
     /// The networks with zero weights (see [`Self::init_weights`]); stochastic actions add
     /// Gaussian noise of σ `action_noise`.
     pub fn zeroed(
@@ -139,9 +139,9 @@ impl Td3Policy {
         config: &NetConfig,
         action_noise: f32,
     ) -> Result<Self> {
-        let actor = Td3Actor::zeroed("actor", obs_dim, act_dim, config, action_noise)?;
+        let actor = DeterministicActor::zeroed("actor", obs_dim, act_dim, config, action_noise)?;
         let actor_target =
-            Td3Actor::zeroed("actor_target", obs_dim, act_dim, config, action_noise)?;
+            DeterministicActor::zeroed("actor_target", obs_dim, act_dim, config, action_noise)?;
         let critics = critics_with_target(
             obs_dim,
             act_dim,
