@@ -34,6 +34,7 @@ pub struct JointCalibration {
     pub offset_deg: f64,
     /// Soft limits in the robot's degrees.
     pub min_deg: f64,
+    /// Upper soft limit in the robot's degrees, above `min_deg`.
     pub max_deg: f64,
 }
 
@@ -44,6 +45,7 @@ pub struct Calibration {
     /// A label: the robot model (and serial number, if you like).
     #[serde(default)]
     pub robot: String,
+    /// One table per joint, j1 to j6 (`[[joint]]` in the file).
     #[serde(rename = "joint")]
     pub joints: Vec<JointCalibration>,
 }

@@ -2,20 +2,28 @@
 
 use thiserror::Error;
 
+/// What can go wrong in the deployment layer: the controller link, files and settings, and
+/// the layers below.
 #[derive(Debug, Error)]
 pub enum DeployError {
     /// A network call failed or timed out; names the call and the address.
     #[error("{call} to {addr}: {message}")]
     Network {
+        /// The call or step, e.g. an XML-RPC method or `UDP servo`.
         call: String,
+        /// The address it was made to or listened on (`host:port`).
         addr: String,
+        /// What went wrong.
         message: String,
     },
     /// The controller answered with a non-zero error code.
     #[error("{call}: controller error {code} ({meaning})")]
     Controller {
+        /// The XML-RPC method or command.
         call: String,
+        /// The controller's error code.
         code: i64,
+        /// The code's meaning ([`crate::fairino::error_code_meaning`]).
         meaning: String,
     },
     /// A reply or frame that does not follow the protocol.
@@ -23,20 +31,31 @@ pub enum DeployError {
     Protocol(String),
     /// A bad file or setting, naming where.
     #[error("{what}: {message}")]
-    Config { what: String, message: String },
+    Config {
+        /// The file, setting or option at fault.
+        what: String,
+        /// Why it is refused.
+        message: String,
+    },
+    /// A file or socket operation failed.
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] fairgrasp_sim::SimError),
+    /// The environment layer failed (the model's env, its settings).
     #[error(transparent)]
     Env(#[from] fairgrasp_env::EnvError),
+    /// The RL layer failed (loading a model or its policy).
     #[error(transparent)]
     Rl(#[from] fairgrasp_rl::error::RlError),
+    /// Anything else, with its message.
     #[error("{0}")]
     Other(String),
 }
 
 impl DeployError {
+    /// A [`DeployError::Config`] naming `what`.
     pub fn config(what: impl Into<String>, message: impl Into<String>) -> Self {
         Self::Config {
             what: what.into(),
@@ -45,4 +64,5 @@ impl DeployError {
     }
 }
 
+/// Result alias for the deployment layer.
 pub type Result<T, E = DeployError> = std::result::Result<T, E>;

@@ -4,11 +4,14 @@
 use crate::calibration::Calibration;
 use fairgrasp_sim::envelope::Envelope;
 
-/// A part of the arm placed outside what a check allows: its name (the model's link) and the
-/// centre of the covering sphere that was refused (mm, robot base frame).
+/// A part of the arm placed outside what a check allows: its name and where it is (mm, robot
+/// base frame).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PartOutside {
+    /// `TCP`, or the model's name of the part (a link, a finger).
     pub part: String,
+    /// The TCP, or the centre of the part's covering sphere that was refused (mm, robot base
+    /// frame).
     pub at_mm: [f64; 3],
 }
 
@@ -21,6 +24,8 @@ pub struct ArmKinematics {
 }
 
 impl ArmKinematics {
+    /// The kinematics of `envelope` (the simulator's arm), robot joints mapped through
+    /// `calibration`.
     pub fn new(envelope: Envelope, calibration: Calibration) -> Self {
         Self {
             envelope,

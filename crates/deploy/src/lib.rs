@@ -12,6 +12,8 @@
 //! - [`export`]: ONNX and safetensors files of a trained policy.
 //! - [`robustness`]: a policy's success over a grid of held-out conditions.
 
+#![warn(missing_docs)]
+
 pub mod calibration;
 pub mod commissioning;
 pub mod error;

@@ -29,6 +29,7 @@ pub struct PoseMessage {
     /// Unit quaternion x, y, z, w (identity when absent).
     #[serde(default = "identity")]
     pub orientation_xyzw: [f64; 4],
+    /// The sender's time stamp (s, its own clock); only logged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stamp: Option<f64>,
 }
@@ -81,7 +82,9 @@ impl PoseMessage {
 /// A pose with the moment it arrived.
 #[derive(Clone, Debug)]
 pub struct ReceivedPose {
+    /// The message as received.
     pub message: PoseMessage,
+    /// When it was received (this machine's clock).
     pub received_at: Instant,
 }
 

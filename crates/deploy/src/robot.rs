@@ -23,9 +23,11 @@ pub struct RobotState {
     pub robot_mode: u8,
     /// The controller's fault: 0 and 0 when none.
     pub main_code: i32,
+    /// Its sub code (`sub_code`).
     pub sub_code: i32,
     /// The arm is in position (no motion under way).
     pub motion_done: bool,
+    /// The emergency stop is pressed (`emergency_stop`).
     pub emergency_stop: bool,
     /// Safety stop inputs 0 and 1.
     pub safety_stop: [bool; 2],
@@ -33,8 +35,11 @@ pub struct RobotState {
     pub enabled: bool,
     /// Gripper position, % of its stroke (0 closed … 100 open).
     pub gripper_position: u8,
+    /// The gripper's last motion has ended (`gripper_motion_done`).
     pub gripper_motion_done: bool,
+    /// The gripper is activated (`gripper_active`).
     pub gripper_active: bool,
+    /// The gripper's fault code, 0 when none (`gripper_fault`).
     pub gripper_fault: i32,
     /// The gripper's current, % of its rating (`gripper_current`): a gripper holding an object
     /// draws the current of its force setting.
@@ -81,7 +86,9 @@ impl Default for RobotState {
 /// A state with the moment this process received it.
 #[derive(Clone, Debug)]
 pub struct StampedState {
+    /// The state as received.
     pub state: RobotState,
+    /// When this process received it.
     pub received_at: Instant,
     /// Counts received states; a stalled stream stops counting.
     pub sequence: u64,
@@ -92,43 +99,64 @@ pub struct StampedState {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "call")]
 pub enum RobotCommand {
+    /// Enables or disables the drives.
     RobotEnable {
+        /// `true` enables (1), `false` disables (0).
         enable: bool,
     },
     /// 0 automatic, 1 manual.
     Mode {
+        /// The mode to switch to.
         mode: u8,
     },
     /// Global speed override, 1–100 %.
     SetSpeed {
+        /// The override (%).
         percent: u8,
     },
     /// Blocking joint move; `speed_percent` and `acc_percent` of the controller's maximum
     /// joint speed and acceleration (in (0, 100]).
     MoveJ {
+        /// Target joint angles (deg), j1…j6.
         joints_deg: [f64; 6],
+        /// Joint speed, % of the maximum (`vel`).
         speed_percent: f64,
+        /// Joint acceleration, % of the maximum (`acc`).
         acc_percent: f64,
     },
+    /// Starts a servo session: [`RobotCommand::ServoJ`] set points follow.
     ServoMoveStart,
     /// One servo set point, reached in `cmd_t` seconds (0.001–0.016).
     ServoJ {
+        /// Set point joint angles (deg), j1…j6.
         joints_deg: [f64; 6],
+        /// Time to reach it (s), the controller's `cmdT`.
         cmd_t: f64,
     },
+    /// Ends the servo session.
     ServoMoveEnd,
+    /// Stops the motion under way.
     StopMotion,
+    /// Clears the controller's resettable faults.
     ResetAllError,
+    /// Resets or activates a gripper.
     ActGripper {
+        /// Gripper number, 1…8.
         index: u8,
+        /// `true` activates (1), `false` resets (0).
         activate: bool,
     },
     /// `position_percent`: 0 closed … 100 open; non-blocking.
     MoveGripper {
+        /// Gripper number, 1…8.
         index: u8,
+        /// Target opening (%).
         position_percent: u8,
+        /// Speed, % of the gripper's maximum.
         speed_percent: u8,
+        /// Force, % of the gripper's maximum.
         force_percent: u8,
+        /// Longest the motion may take (ms).
         max_time_ms: u32,
     },
 }
@@ -196,5 +224,6 @@ pub trait RobotLink: Send {
 
 /// See [`RobotLink::side_line`]. Each call has the link's timeout.
 pub trait SideLine: Send + Sync {
+    /// Sends one command and waits for the controller's reply, as [`RobotLink::send`] does.
     fn send(&self, command: &RobotCommand) -> Result<()>;
 }

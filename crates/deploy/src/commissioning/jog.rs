@@ -34,6 +34,7 @@ impl Default for JogOptions {
 /// One joint's result.
 #[derive(Clone, Debug, PartialEq)]
 pub struct JogOutcome {
+    /// The joint tested (1-based).
     pub joint: usize,
     /// The jog in robot degrees (its sign: the simulator's positive direction).
     pub jog_deg: f64,

@@ -17,7 +17,9 @@ use std::path::{Path, PathBuf};
 /// The file formats `fairgrasp export` writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
+    /// `policy.onnx`: the ONNX graph.
     Onnx,
+    /// `policy.safetensors`: the tensors, with a `__metadata__` description.
     Safetensors,
 }
 

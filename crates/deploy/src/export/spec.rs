@@ -15,9 +15,13 @@ pub use fairgrasp_rl::policies::Head;
 /// [`fairgrasp_env::wrappers::VecNormalizeState::normalize_obs`] does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ObsNormalization {
+    /// Running mean of each observation value.
     pub mean: Vec<f64>,
+    /// Running variance of each observation value.
     pub var: Vec<f64>,
+    /// Added to the variance before the square root.
     pub epsilon: f64,
+    /// Bound on each normalised value (±).
     pub clip: f64,
 }
 
@@ -33,10 +37,13 @@ impl ObsNormalization {
 pub struct Dense {
     /// The layer's name in `model.safetensors` (`pi.l0`, `actor.l2`).
     pub name: String,
+    /// Width of the input.
     pub inputs: usize,
+    /// Width of the output.
     pub outputs: usize,
     /// `outputs × inputs`, row-major (PyTorch's and candle's layout).
     pub weight: Vec<f32>,
+    /// `outputs` values.
     pub bias: Vec<f32>,
 }
 
@@ -44,26 +51,36 @@ pub struct Dense {
 /// [`RescaleAction`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ActionBox {
+    /// Lower bound of each action value.
     pub low: Vec<f32>,
+    /// Upper bound of each action value.
     pub high: Vec<f32>,
 }
 
 /// Everything an exported policy file holds.
 #[derive(Clone, Debug)]
 pub struct PolicySpec {
+    /// Id of the environment it was trained on (`"FaArmGrasp-v0"`).
     pub env_id: String,
+    /// The environment's configuration, as the model saved it.
     pub env_config: serde_json::Value,
     /// The name of the algorithm that trained it.
     pub algo: String,
+    /// Observation width.
     pub obs_dim: usize,
+    /// Action width.
     pub act_dim: usize,
+    /// Environment steps it was trained for.
     pub num_timesteps: u64,
     /// `None` when the model acts on raw observations.
     pub normalization: Option<ObsNormalization>,
     /// In order from the observation; an activation follows every layer but the last.
     pub layers: Vec<Dense>,
+    /// The activation after each hidden layer.
     pub activation: Activation,
+    /// How the last layer's outputs become the action.
     pub head: Head,
+    /// The environment's action box; the policy's `[-1, 1]` actions are mapped onto it.
     pub env_action: ActionBox,
     /// What each action value means, in words.
     pub action_layout: String,

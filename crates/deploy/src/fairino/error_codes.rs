@@ -8,17 +8,29 @@
 /// The controller's return codes that fairgrasp names, as the twin gives them and the client
 /// reads them ([`error_code_meaning`] has every one the vendor documents).
 pub mod codes {
+    /// Success.
     pub const OK: i32 = 0;
+    /// Wrong number of parameters.
     pub const PARAM_COUNT: i32 = 3;
+    /// A parameter out of range.
     pub const PARAM_VALUE: i32 = 4;
+    /// Execution failed.
     pub const EXECUTION_FAILED: i32 = 14;
+    /// Inverse kinematics failed.
     pub const IK_FAILED: i32 = 28;
+    /// A ServoJ target over a joint limit.
     pub const SERVOJ_OVER_LIMIT: i32 = 29;
+    /// A fault that cannot be reset: power-cycle the control box.
     pub const NOT_RESETTABLE: i32 = 30;
+    /// Emergency stop pressed.
     pub const EMERGENCY_STOP: i32 = 31;
+    /// Gripper motion error.
     pub const GRIPPER_MOTION: i32 = 73;
+    /// A wait timed out.
     pub const WAIT_TIMEOUT: i32 = 76;
+    /// Safety stop (`safety_stop0_state` or `safety_stop1_state` set in the CNDE stream).
     pub const SAFETY_STOP: i32 = 99;
+    /// Robot not enabled.
     pub const NOT_ENABLED: i32 = 101;
 }
 

@@ -14,7 +14,9 @@ use std::time::Duration;
 pub const DEFAULT_PORT: u16 = 20007;
 /// Command ids (the SDK's).
 pub const SERVO_MOVE_START: u16 = 689;
+/// Command id of `ServoMoveEnd()`.
 pub const SERVO_MOVE_END: u16 = 690;
+/// Command id of `ServoJ(…)` ([`servo_j_content`]).
 pub const SERVO_J: u16 = 376;
 
 const HEAD: &str = "/f/b";
@@ -26,8 +28,11 @@ pub const MAX_DATAGRAM: usize = 1024;
 /// One decoded datagram.
 #[derive(Clone, Debug, PartialEq)]
 pub struct UdpCommand {
+    /// The sender's counter, wrapping after 65535.
     pub count: u16,
+    /// The command id ([`SERVO_J`], …).
     pub id: u16,
+    /// The call, e.g. `ServoMoveStart()`.
     pub content: String,
 }
 

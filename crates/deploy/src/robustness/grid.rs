@@ -58,6 +58,7 @@ impl Axis {
 pub struct Nominal {
     /// kg
     pub object_mass: f32,
+    /// Friction coefficient.
     pub object_friction: f32,
 }
 
@@ -115,22 +116,29 @@ impl Condition {
 /// The values one axis takes, and its central range (inclusive).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AxisSpec {
+    /// The axis varied.
     pub axis: Axis,
+    /// Its values, in the axis's unit ([`Axis::format_value`]).
     pub values: Vec<f32>,
+    /// The central range `[low, high]`.
     pub central: [f32; 2],
 }
 
 /// One row of the grid: `axis` at `value`, every other axis nominal.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cell {
+    /// The axis varied.
     pub axis: Axis,
+    /// Its value in this row.
     pub value: f32,
+    /// The whole condition: `axis` at `value`, the others nominal.
     pub condition: Condition,
 }
 
 /// Held-out conditions, one axis at a time around nominal.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Grid {
+    /// One entry per axis varied.
     pub axes: Vec<AxisSpec>,
 }
 

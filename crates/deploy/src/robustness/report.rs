@@ -11,20 +11,28 @@ use std::path::Path;
 /// One row of the table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CellResult {
+    /// The axis varied.
     pub axis: Axis,
+    /// Its value in this row.
     pub value: f32,
     /// The value with its unit, as printed.
     pub label: String,
+    /// The whole condition.
     pub condition: Condition,
     /// Whether the condition lies in the grid's central region.
     pub central: bool,
+    /// Fraction of episodes that succeeded (0–1).
     pub success_rate: f32,
+    /// Mean undiscounted episode return.
     pub mean_return: f32,
+    /// Mean episode length (control steps).
     pub mean_length: f32,
+    /// Episodes run.
     pub episodes: u32,
 }
 
 impl CellResult {
+    /// The row of `cell` from its evaluation.
     pub fn new(cell: &Cell, central: bool, result: &EvalResult) -> Self {
         Self {
             axis: cell.axis,
@@ -48,7 +56,9 @@ pub struct CentralSummary {
     pub ranges: Vec<(Axis, [f32; 2])>,
     /// Distinct conditions in the region.
     pub conditions: usize,
+    /// Mean success rate over those conditions (0–1).
     pub mean_success: f32,
+    /// Lowest success rate among them (0–1).
     pub min_success: f32,
     /// The row with the lowest success (`axis value`).
     pub worst: String,
@@ -82,16 +92,23 @@ impl CentralSummary {
 pub struct RobustnessReport {
     /// The model directory.
     pub model: String,
+    /// Id of the environment evaluated.
     pub env_id: String,
+    /// The algorithm that trained the model.
     pub algo: String,
+    /// Environment steps the model was trained for.
     pub trained_steps: u64,
     /// Whether the model was trained with domain randomisation.
     pub trained_randomized: bool,
+    /// Episodes evaluated per cell.
     pub episodes_per_cell: u32,
     /// Episode k of every cell uses seed `first_seed + k`.
     pub first_seed: u64,
+    /// The model's nominal object mass and friction.
     pub nominal: Nominal,
+    /// One row per cell, axis by axis.
     pub cells: Vec<CellResult>,
+    /// The central region's summary; `None` when no row is central.
     pub central: Option<CentralSummary>,
     /// Wall time of the run (s).
     pub seconds: f64,

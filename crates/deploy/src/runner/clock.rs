@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 /// The longest cmdT a FAIRINO controller accepts in ServoJ (s).
 pub const MAX_CMD_T: f64 = 0.016;
 
+/// The servo ticks' fixed schedule: tick `n` is due at `start + n × period`.
 #[derive(Clone, Debug)]
 pub struct ServoClock {
     start: Instant,
@@ -35,6 +36,7 @@ impl ServoClock {
         }
     }
 
+    /// Time between ticks.
     pub fn period(&self) -> Duration {
         self.period
     }

@@ -12,6 +12,8 @@ use std::time::Instant;
 /// A command under way on the side line.
 type Aside = (RobotCommand, JoinHandle<Result<(), String>>);
 
+/// The deployment loop's link to the controller: logs every command, prints instead of sending
+/// in a dry run, and refuses every command once a fault has tripped it.
 pub struct GuardedLink {
     link: Box<dyn RobotLink>,
     live: bool,
@@ -24,6 +26,7 @@ pub struct GuardedLink {
     last_sequence: u64,
     /// From the fault's detection to StopMotion and ServoMoveEnd both answered.
     stopped_in: Option<std::time::Duration>,
+    /// The run's log; every command and every new state goes to it.
     pub log: JsonLog,
 }
 

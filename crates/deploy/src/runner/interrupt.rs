@@ -16,6 +16,7 @@ const POLL: Duration = Duration::from_millis(2);
 pub struct InterruptStop {
     /// From the flag seen to StopMotion answered.
     pub took: Duration,
+    /// StopMotion's outcome, the error as text.
     pub result: Result<(), String>,
 }
 

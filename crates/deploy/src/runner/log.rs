@@ -178,6 +178,7 @@ impl JsonLog {
         }
     }
 
+    /// Logs a command and its outcome: `{"sent": …}`, with `"error"` when it failed.
     pub fn sent(&self, command: &RobotCommand, result: std::result::Result<(), String>) {
         self.queue(|| Event::Sent {
             command: command.clone(),
@@ -185,6 +186,7 @@ impl JsonLog {
         });
     }
 
+    /// Logs a state report with its sequence number: `{"state": …, "sequence": n}`.
     pub fn state(&self, sequence: u64, state: &RobotState) {
         self.queue(|| Event::State {
             sequence,
@@ -192,6 +194,7 @@ impl JsonLog {
         });
     }
 
+    /// Logs one control step: the observation the policy read and its raw output (`{"step": …}`).
     pub fn step(&self, episode: u32, step: u32, obs: &[f32], action: &[f32]) {
         self.queue(|| Event::Step {
             episode,
@@ -201,6 +204,7 @@ impl JsonLog {
         });
     }
 
+    /// Logs `{key: value}` (a fault, an episode's report, a setting).
     pub fn note(&self, key: &str, value: serde_json::Value) {
         self.queue(|| Event::Note {
             key: key.to_string(),

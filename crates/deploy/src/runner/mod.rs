@@ -56,9 +56,11 @@ const GRIPPER_OPEN_LIMIT: Duration = Duration::from_secs(3);
 pub struct DeployOptions {
     /// Send commands (false: a dry run that prints them).
     pub live: bool,
+    /// Episodes to run.
     pub episodes: u32,
     /// Control steps per episode (default: the model's episode length).
     pub max_steps: Option<u32>,
+    /// The safety layer's limits.
     pub safety: SafetyConfig,
     /// The gripper's index on the controller (1–8).
     pub gripper_index: u8,
@@ -130,6 +132,7 @@ pub struct EpisodeReport {
 /// How a run ended.
 #[derive(Debug)]
 pub struct RunReport {
+    /// The episodes that ended, in order (not one a fault stopped).
     pub episodes: Vec<EpisodeReport>,
     /// The fault that stopped the arm, if one did.
     pub fault: Option<Fault>,

@@ -32,8 +32,11 @@ pub struct ModelIo {
     pub nominal: ArmState,
     /// What the state estimator knows beyond the controller's readings.
     pub facts: EstimatorFacts,
+    /// The simulator's control period (s): the time one policy action lasts.
     pub control_period: f64,
+    /// Control steps before the model's episodes were truncated in training.
     pub max_steps: u32,
+    /// `(lower, upper)` joint limits of the arm (rad, the simulator's joints).
     pub limits_rad: Vec<(f32, f32)>,
 }
 
@@ -223,6 +226,7 @@ impl ModelIo {
         })
     }
 
+    /// How the policy's actions command the arm: joint deltas or TCP deltas.
     pub fn action_mode(&self) -> ActionMode {
         self.env.inner().mapper().config().action_mode
     }

@@ -26,10 +26,12 @@ pub struct SafetyConfig {
     pub speed_scale: f64,
     /// The TCP must stay in this box (robot base frame, mm).
     pub workspace_min_mm: [f64; 3],
+    /// Upper corner of that box (mm), above `workspace_min_mm` on every axis.
     pub workspace_max_mm: [f64; 3],
     /// Height of the table top in the base frame (mm); the TCP stays `table_margin_mm` above
     /// it. Unset: the height the model was trained with.
     pub table_z_mm: Option<f64>,
+    /// How far the TCP stays above the table top (mm), ≥ 0.
     pub table_margin_mm: f64,
     /// Every part of the arm and gripper (the fingertips, 20 mm past the TCP, included) stays
     /// this far above the table (mm). 3 mm keeps a top-down TCP 23 mm up, under the 25 mm the
@@ -40,6 +42,8 @@ pub struct SafetyConfig {
     /// and ceiling. The default is the FR5's reach with a tool (922 mm from the shoulder):
     /// set your cell's.
     pub cell_min_mm: [f64; 3],
+    /// Upper corner of the cell (mm), above `cell_min_mm` on every axis; the TCP's box lies
+    /// inside it.
     pub cell_max_mm: [f64; 3],
     /// The newest state may be at most this old (ms); the stream sends one every 8 ms. Frames
     /// whose controller clock has stood still this long are old too.

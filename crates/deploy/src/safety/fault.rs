@@ -7,41 +7,55 @@ use std::fmt;
 pub enum Fault {
     /// No fresh state from the controller within the deadline.
     StaleState {
+        /// Age of the newest state (ms).
         age_ms: f64,
+        /// The watchdog's deadline (ms).
         deadline_ms: f64,
     },
     /// State frames arrive, but the controller's clock in them has not moved for this long:
     /// they carry old data.
     FrozenState {
+        /// How long the clock has stood still (ms).
         for_ms: f64,
+        /// The watchdog's deadline (ms).
         deadline_ms: f64,
     },
     /// The controller reports a collision (`collision_state`).
     Collision,
     /// The newest object pose is older than the deadline.
     StalePose {
+        /// Age of the newest pose (ms).
         age_ms: f64,
+        /// The pose deadline (ms).
         deadline_ms: f64,
     },
     /// The state stream failed (closed, reset, unreadable).
     StreamFailed(String),
     /// A call to the controller failed or timed out.
     CallFailed {
+        /// The call: an XML-RPC method, or the policy (`policy`, `policy action`).
         call: String,
+        /// What went wrong.
         message: String,
     },
     /// The controller reports a fault in `main_code` / `sub_code`.
     ControllerFault {
+        /// The controller's `main_code`.
         main_code: i32,
+        /// The controller's `sub_code`.
         sub_code: i32,
+        /// `main_code` in words.
         meaning: String,
     },
+    /// The emergency stop is pressed (`emergency_stop`).
     EmergencyStop,
     /// Safety stop input 0 or 1.
     SafetyStop(usize),
     /// The policy gave NaN or an infinite value (or a wrong number of values).
     NonFiniteOutput {
+        /// Which value: of the policy's output, or joint of the filter's target.
         index: usize,
+        /// The value found.
         value: f32,
     },
     /// Even the strongest allowed braking would take the TCP out of the workspace box, or a
@@ -49,6 +63,7 @@ pub enum Fault {
     WorkspaceExit {
         /// "TCP", or the model's name of the part (a link, a finger).
         part: String,
+        /// Where (mm, robot base frame): the TCP, or the centre of the part's covering sphere.
         at_mm: [f64; 3],
         /// What it breaks, in words.
         limit: String,

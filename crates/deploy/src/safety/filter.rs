@@ -37,7 +37,8 @@ const ARM_REACH_MM: f64 = 1500.0;
 /// [`SafetyFilter::check_path`] (mm), at most.
 pub const PATH_STEP_MM: f64 = 1.0;
 
-/// The safety layer's motion filter (see the [module](self) documentation).
+/// The safety layer's motion filter (see [`crate::safety`]; its design is described at the top
+/// of `src/safety/filter.rs`).
 pub struct SafetyFilter {
     ramp: JointRamp,
     lower: [f64; 6],
@@ -283,7 +284,7 @@ impl SafetyFilter {
     /// Checks a point-to-point move (MoveJ: every joint in step along the straight joint-space
     /// line) from `from` to `to` (deg): every point of it inside the soft limits, the TCP in
     /// the box and the whole arm clear of the table and inside the cell. Points are checked so
-    /// densely that nothing of the arm moves more than [`PATH_STEP_MM`] between two of them.
+    /// densely that nothing of the arm moves more than `PATH_STEP_MM` (1 mm) between two of them.
     ///
     /// `from` is a measured pose: the drives lag their set points, so an arm stopped just past
     /// a soft limit, the box or the table's clearance may move home through limits grown to

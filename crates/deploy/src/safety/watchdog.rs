@@ -31,6 +31,7 @@ impl Watchdog {
         }
     }
 
+    /// How old a state may be, and how long the controller's clock may stand still.
     pub fn deadline(&self) -> Duration {
         self.deadline
     }

@@ -21,8 +21,11 @@ pub const MIN_SAMPLES: usize = 50;
 /// A signal sampled every `dt` seconds from `t0`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Uniform {
+    /// Time of the first sample (s).
     pub t0: f64,
+    /// Time between samples (s).
     pub dt: f64,
+    /// The signal at `t0`, `t0 + dt`, …
     pub values: Vec<f64>,
 }
 
@@ -45,6 +48,7 @@ impl Uniform {
         self.values[i] + (self.values[i + 1] - self.values[i]) * s
     }
 
+    /// Time of the last sample (s); `t0` when there is none or one.
     pub fn end(&self) -> f64 {
         self.t0 + self.dt * self.values.len().saturating_sub(1) as f64
     }
@@ -83,14 +87,18 @@ pub fn delay_and_lag(input: &Uniform, delay: f64, tau: f64) -> Uniform {
 /// Recorded samples of one joint: times (s, the simulated response's clock) and angles (deg).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Samples {
+    /// Sample times (s).
     pub t: Vec<f64>,
+    /// Joint angle at each time (deg).
     pub q: Vec<f64>,
 }
 
 /// One joint's fitted drive.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct JointFit {
+    /// Pure delay (ms), within [0, [`MAX_DELAY_MS`]].
     pub delay_ms: f64,
+    /// First-order lag time constant (ms), within [0, [`MAX_TAU_MS`]].
     pub tau_ms: f64,
     /// RMS of what the model leaves unexplained (deg), a constant offset removed.
     pub rms_deg: f64,

@@ -3,8 +3,8 @@
 //!
 //! - [`plan`]: the excitation, one joint at a time (steps, then a chirp), a few degrees about
 //!   the present pose, well under the safety caps;
-//! - [`record`]: running it through the safety layer and recording every set point sent and
-//!   every state received, then timing the gripper closing on nothing;
+//! - [`record`](mod@record): running it through the safety layer and recording every set
+//!   point sent and every state received, then timing the gripper closing on nothing;
 //! - [`replay`]: the recorded set points through the simulated arm (the model in the loop);
 //! - [`fit`]: per joint, the pure delay and first-order lag that make the simulator match;
 //! - [`model`]: the TOML file the twin (`fairgrasp twin --drives`) reads.

@@ -63,8 +63,11 @@ pub struct GripperTiming {
 pub struct DriveModel {
     /// The environment whose simulated arm the drives were fitted against.
     pub env: String,
+    /// The identified joints (`[[joints]]`), each at most once; joints not listed were not
+    /// identified.
     #[serde(default)]
     pub joints: Vec<JointDrive>,
+    /// The gripper's closing time, when it was measured (`[gripper]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gripper: Option<GripperTiming>,
 }
@@ -120,6 +123,7 @@ impl DriveModel {
         model
     }
 
+    /// The file's text: a comment line, then the TOML.
     pub fn to_toml(&self) -> Result<String> {
         Ok(format!(
             "# fairgrasp sysid: per joint, the delay and first-order lag between the \
@@ -128,6 +132,7 @@ impl DriveModel {
         ))
     }
 
+    /// Parses and checks a file's text.
     pub fn from_toml(text: &str) -> Result<Self> {
         let model: Self =
             toml::from_str(text).map_err(|e| DeployError::config("drive model", e.to_string()))?;

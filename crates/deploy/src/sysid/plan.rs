@@ -32,7 +32,9 @@ const MJ_ACC: f64 = 5.773_502_691_896_258;
 pub struct Segment {
     /// 1…6.
     pub joint: usize,
+    /// When the joint's share begins (s).
     pub start: f64,
+    /// When it ends (s).
     pub end: f64,
 }
 
@@ -90,10 +92,12 @@ impl ExcitationPlan {
         })
     }
 
+    /// The joints excited, in order (1…6).
     pub fn joints(&self) -> &[usize] {
         &self.joints
     }
 
+    /// Step and chirp amplitude (deg).
     pub fn amplitude_deg(&self) -> f64 {
         self.amplitude
     }
@@ -113,6 +117,7 @@ impl ExcitationPlan {
         self.per_joint() * self.joints.len() as f64
     }
 
+    /// Each joint's share, in order.
     pub fn segments(&self) -> Vec<Segment> {
         let d = self.per_joint();
         (self.joints.iter().enumerate())

@@ -46,8 +46,11 @@ pub struct SentSetPoint {
     pub t: f64,
     /// When the call began and when its reply came (s): it reached the controller between.
     pub sent: f64,
+    /// When its reply came (s).
     pub replied: f64,
+    /// The set point (deg).
     pub joints_deg: [f64; 6],
+    /// Its cmdT (s).
     pub cmd_t: f64,
 }
 
@@ -58,6 +61,7 @@ pub struct RecordedState {
     pub received: f64,
     /// The controller's clock in it (ms), when the stream carries one.
     pub clock_ms: Option<i64>,
+    /// Joint angles (deg).
     pub joints_deg: [f64; 6],
     /// The last ServoJ target the controller had received by its clock, when the stream
     /// carries it.
@@ -69,10 +73,13 @@ pub struct RecordedState {
 pub struct Recording {
     /// The measured pose the excitation was about (deg).
     pub start_deg: [f64; 6],
+    /// Every set point sent, in order.
     pub commands: Vec<SentSetPoint>,
+    /// Every state received, in order.
     pub states: Vec<RecordedState>,
     /// Each joint's share, in the recording's time.
     pub segments: Vec<Segment>,
+    /// The gripper's close on nothing, when it was measured.
     pub gripper: Option<GripperTiming>,
 }
 

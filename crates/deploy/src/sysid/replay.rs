@@ -45,10 +45,12 @@ fn grid_phase(times: &[f64], dt: f64) -> f64 {
 pub struct ArmSim {
     /// An arm task of the env registry (its scene: the FR5 as trained).
     pub env_id: String,
+    /// The env's configuration table (empty: its defaults).
     pub env_config: toml::Table,
 }
 
 impl ArmSim {
+    /// `env_id` with its default configuration.
     pub fn new(env_id: &str) -> Self {
         Self {
             env_id: env_id.to_string(),

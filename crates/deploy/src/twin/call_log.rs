@@ -17,6 +17,7 @@ pub const MAX_KEPT: usize = 50_000;
 pub struct CallRecord {
     /// When the call arrived (s since the twin started).
     pub t: f64,
+    /// The XML-RPC method.
     pub method: String,
     /// The parameters, as JSON (ints and doubles as numbers, arrays as arrays).
     pub params: Vec<serde_json::Value>,
@@ -47,6 +48,8 @@ impl CallLog {
         })
     }
 
+    /// Keeps a call, dropping the oldest beyond [`MAX_KEPT`], and writes its line to the file,
+    /// if any.
     pub fn record(&self, record: CallRecord) {
         if let Some(file) = self.file.lock().expect("call log lock").as_mut() {
             // A full disk must not take the controller down: the line is lost, the call is not.

@@ -111,9 +111,11 @@ pub const DEFAULT_FOLLOWING_ERROR_DEG: f64 = 20.0;
 /// How the controller is found at power-on.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StartState {
+    /// Drives enabled.
     pub enabled: bool,
     /// Automatic mode (remote motion allowed); manual otherwise.
     pub automatic: bool,
+    /// Gripper already activated.
     pub gripper_active: bool,
 }
 
@@ -132,10 +134,14 @@ impl Default for StartState {
 pub struct ControllerConfig {
     /// Joint limits (deg).
     pub limits_deg: [(f64, f64); 6],
+    /// Each joint's top speed (deg/s): what ServoJ steps are checked against, and a MoveJ's at
+    /// 100 %.
     pub max_speed_deg: Joints,
+    /// Each joint's MoveJ acceleration at `acc` 100 % (deg/s²).
     pub max_acc_deg: Joints,
     /// A move counts as done this long after its profile ended, settled or not (s).
     pub settle_timeout: f64,
+    /// How the controller is found at power-on.
     pub start: StartState,
     /// How far a ServoJ step may exceed the top speed, as a share of it.
     pub servo_speed_tolerance: f64,
@@ -175,7 +181,9 @@ impl ControllerConfig {
 /// What the simulation measured.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Measured {
+    /// Joint angles (deg).
     pub joints_deg: Joints,
+    /// Joint speeds (deg/s).
     pub joint_speeds_deg: Joints,
     /// Gripper opening, % of the stroke.
     pub gripper_percent: f64,
@@ -188,7 +196,9 @@ pub struct Measured {
 /// What the simulation should track.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Setpoint {
+    /// Joint set points (deg).
     pub joints_deg: Joints,
+    /// Gripper opening set point, % of the stroke.
     pub gripper_percent: f64,
     /// The force the fingers squeeze with, % (`MoveGripper`'s force).
     pub gripper_force_percent: f64,
@@ -333,6 +343,7 @@ impl Controller {
         }
     }
 
+    /// The limits and timing it runs with.
     pub fn config(&self) -> &ControllerConfig {
         &self.config
     }
@@ -830,22 +841,27 @@ impl Controller {
         self.config.tracking
     }
 
+    /// Sets how the drives follow their set points.
     pub fn set_tracking(&mut self, tracking: TrackingModel) {
         self.config.tracking = tracking;
     }
 
+    /// Sets the following-error limit (deg); `None`: not checked.
     pub fn set_following_error(&mut self, limit_deg: Option<f64>) {
         self.config.following_error_deg = limit_deg;
     }
 
+    /// Sets how far a ServoJ step may exceed the top speed, as a share of it.
     pub fn set_servo_speed_tolerance(&mut self, share: f64) {
         self.config.servo_speed_tolerance = share;
     }
 
+    /// Sets the braking deceleration (deg/s²).
     pub fn set_brake_decel(&mut self, deg_s2: f64) {
         self.config.brake_decel_deg_s2 = deg_s2;
     }
 
+    /// Sets the collision level (N of net external force); `None`: detection off.
     pub fn set_collision_level(&mut self, newtons: Option<f64>) {
         self.config.collision_level_n = newtons;
     }

@@ -19,7 +19,9 @@ use std::sync::atomic::AtomicBool;
 /// What the episodes came to.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Evaluation {
+    /// Episodes played, those a fault stopped included.
     pub played: u32,
+    /// Episodes the twin judged a success (by the task's rule).
     pub successes: u32,
     /// The fault of each episode stopped by one, in order.
     pub faults: Vec<String>,

@@ -49,7 +49,9 @@ pub type TrackingModel = [JointTracking; 6];
 /// A share of events and the delay each gets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Occasional {
+    /// Chance of each event (0–1).
     pub probability: f64,
+    /// The delay each such event gets (ms).
     pub ms: f64,
 }
 
@@ -58,6 +60,7 @@ pub struct Occasional {
 pub struct SlowReplies {
     /// The method to slow down; every method when `None`.
     pub method: Option<String>,
+    /// The extra delay of each slowed reply (ms).
     pub delay_ms: f64,
     /// How many more calls to slow down; every one when `None`.
     pub remaining: Option<u32>,
@@ -67,15 +70,25 @@ pub struct SlowReplies {
 /// the stream directly).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FaultSettings {
+    /// Every XML-RPC reply this much later (ms), half before the call acts, half after.
     pub latency_ms: f64,
+    /// Every CNDE frame shows the robot as it was this long ago (ms).
     pub stream_latency_ms: f64,
+    /// σ of the Gaussian noise on the reported joints (deg).
     pub joint_noise_deg: f64,
+    /// σ of the Gaussian noise on the published object position (mm).
     pub pose_noise_mm: f64,
+    /// Slowed replies, if any.
     pub slow: Option<SlowReplies>,
+    /// The CNDE stream sends no frames (connections stay open).
     pub stalled: bool,
+    /// σ of each reply's half-normal extra latency (ms).
     pub latency_jitter_ms: f64,
+    /// Replies now and then later still.
     pub latency_outliers: Option<Occasional>,
+    /// Probability that a due CNDE frame is left out.
     pub drop_frames: f64,
+    /// Due CNDE frames now and then held back.
     pub late_frames: Option<Occasional>,
 }
 
@@ -129,32 +142,54 @@ impl FaultSettings {
 /// One fault to inject (see the [module](self) documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub enum FaultCommand {
+    /// `latency_ms`: every XML-RPC reply this much later (ms).
     LatencyMs(f64),
+    /// `stream_latency_ms`: every CNDE frame shows the robot as it was this long ago (ms).
     StreamLatencyMs(f64),
+    /// `joint_noise_deg`: σ of the Gaussian noise on the reported joints (deg).
     JointNoiseDeg(f64),
+    /// `pose_noise_mm`: σ of the Gaussian noise on the published object position (mm).
     PoseNoiseMm(f64),
+    /// `slow`: replies to one method, or to every one, delayed; `None` (`off`) ends it.
     Slow(Option<SlowReplies>),
+    /// `stall`: the CNDE stream stops sending frames (`true`) or resumes.
     Stall(bool),
+    /// `reset_stream`: every CNDE connection reset (RST) now.
     ResetStream,
+    /// `error`: a controller fault in `main_code`/`sub_code` (the arm stops), or none.
     Error {
+        /// The `main_code`; 0 clears the fault.
         main: i32,
+        /// The `sub_code`.
         sub: i32,
+        /// `ResetAllError` cannot clear it (it answers 30).
         fatal: bool,
     },
+    /// `estop`: the e-stop pressed (`true`: the arm stops, main_code 31) or released.
     Estop(bool),
+    /// `safety_stop`: safety-stop inputs 0 and 1 (set: the arm stops, motion calls get 99).
     SafetyStop([bool; 2]),
+    /// `latency_jitter_ms`: σ of each reply's half-normal extra latency (ms).
     LatencyJitterMs(f64),
+    /// `latency_outliers`: now and then a reply later still; `None` (`off`) ends it.
     LatencyOutliers(Option<Occasional>),
+    /// `drop_frames`: probability that a due CNDE frame is left out.
     DropFrames(f64),
+    /// `late_frames`: now and then a CNDE frame held back; `None` (`off`) ends it.
     LateFrames(Option<Occasional>),
+    /// `tracking`: each drive's delay and lag behind its set point, j1 first.
     Tracking(TrackingModel),
     /// `None`: not checked.
     FollowingErrorDeg(Option<f64>),
+    /// `servoj_speed_tolerance`: how far a ServoJ step may exceed the top speed, as a share of it.
     ServojSpeedTolerance(f64),
+    /// `brake_decel_deg_s2`: how hard the set point brakes when the arm stops (deg/s²).
     BrakeDecelDegS2(f64),
     /// `None`: detection off.
     CollisionLevelN(Option<f64>),
+    /// `collision`: a collision now (`true`), or its state and fault cleared.
     Collision(bool),
+    /// `clear`: everything back to normal, faults cleared.
     Clear,
 }
 

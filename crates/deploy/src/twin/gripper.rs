@@ -25,6 +25,7 @@ const STALL_SECONDS: f64 = 0.15;
 /// The gripper state machine.
 #[derive(Clone, Debug)]
 pub struct Gripper {
+    /// Activated (`ActGripper`).
     pub active: bool,
     /// Where the fingers are sent now, and the commanded position.
     ramp: GripperRamp,
@@ -32,6 +33,7 @@ pub struct Gripper {
     ramped_at: f64,
     /// Measured position (%).
     pub position: f64,
+    /// The latest command's motion is done: arrived, stalled or out of time.
     pub done: bool,
     /// Counts `MoveGripper` commands, so a blocking call can wait for its own.
     pub command: u64,

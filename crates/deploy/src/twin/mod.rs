@@ -86,6 +86,7 @@ pub struct TwinConfig {
     pub bind: IpAddr,
     /// Port 0: any free port (see the handle for the one taken).
     pub rpc_port: u16,
+    /// The CNDE state stream's port (TCP, 20005 on the controller); 0: any free port.
     pub cnde_port: u16,
     /// The real-time servo port (UDP, 20007 on the controller); `None`: not served.
     pub servo_udp_port: Option<u16>,
@@ -93,9 +94,11 @@ pub struct TwinConfig {
     pub pose_port: Option<u16>,
     /// Where to send the pose feed as UDP datagrams too.
     pub pose_udp: Option<SocketAddr>,
+    /// Time between two messages of the pose feed.
     pub pose_period: Duration,
     /// Seed of the first episode's placement and of the injected noise.
     pub seed: u64,
+    /// How the controller is found at power-on.
     pub start: StartState,
     /// Faults in force from the start.
     pub faults: Vec<FaultCommand>,
@@ -140,7 +143,9 @@ impl TwinConfig {
 /// The episodes judged so far.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Tally {
+    /// Episodes judged.
     pub episodes: u32,
+    /// Of those, the successes.
     pub successes: u32,
     /// Every episode counted, oldest first.
     pub results: Vec<EpisodeResult>,
@@ -495,6 +500,7 @@ impl TwinHandle {
         self.pose.as_ref().map(|p| p.local_addr())
     }
 
+    /// The arm task staged.
     pub fn env_id(&self) -> &str {
         &self.shared.env_id
     }
@@ -530,6 +536,7 @@ impl TwinHandle {
         self.shared.calls.calls()
     }
 
+    /// Forgets the calls kept in memory (a call log file keeps its lines).
     pub fn clear_calls(&self) {
         self.shared.calls.clear();
     }

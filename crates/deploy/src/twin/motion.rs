@@ -10,9 +10,13 @@ pub type Joints = [f64; 6];
 /// the slowest joint sets the duration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Profile {
+    /// Start joints (deg).
     pub from: Joints,
+    /// Target joints (deg).
     pub to: Joints,
+    /// When the move starts (s).
     pub start: f64,
+    /// How long it takes (s); 0 when `from` is `to`.
     pub duration: f64,
 }
 
@@ -40,6 +44,7 @@ impl Profile {
         }
     }
 
+    /// When the move ends (s).
     pub fn end(&self) -> f64 {
         self.start + self.duration
     }
@@ -59,13 +64,18 @@ impl Profile {
 /// the command arrived to the new target, over `cmdT`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ServoStep {
+    /// The set point when the command arrived (deg).
     pub from: Joints,
+    /// The command's target (deg).
     pub to: Joints,
+    /// When the command arrived (s).
     pub start: f64,
+    /// Its cmdT (s).
     pub duration: f64,
 }
 
 impl ServoStep {
+    /// The set point at time `t` (held at the ends outside the step).
     pub fn at(&self, t: f64) -> Joints {
         let s = if self.duration > 0.0 {
             ((t - self.start) / self.duration).clamp(0.0, 1.0)
@@ -75,6 +85,7 @@ impl ServoStep {
         std::array::from_fn(|j| self.from[j] + (self.to[j] - self.from[j]) * s)
     }
 
+    /// Whether the target is reached at time `t`.
     pub fn finished(&self, t: f64) -> bool {
         t >= self.start + self.duration
     }
@@ -84,9 +95,13 @@ impl ServoStep {
 /// speed, all reaching zero together (so the set point stays on the line it was moving along).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Brake {
+    /// The set point when braking began (deg).
     pub from: Joints,
+    /// Each joint's speed then (deg/s).
     pub speed: Joints,
+    /// When braking began (s).
     pub start: f64,
+    /// Time to rest (s): the fastest joint's speed over the deceleration.
     pub duration: f64,
 }
 
@@ -104,6 +119,7 @@ impl Brake {
         })
     }
 
+    /// The set point at time `t` (at rest after the brake ends).
     pub fn at(&self, t: f64) -> Joints {
         let s = (t - self.start).clamp(0.0, self.duration);
         let k = s - s * s / (2.0 * self.duration);
@@ -115,6 +131,7 @@ impl Brake {
         self.at(self.start + self.duration)
     }
 
+    /// Whether the set point is at rest at time `t`.
     pub fn finished(&self, t: f64) -> bool {
         t >= self.start + self.duration
     }

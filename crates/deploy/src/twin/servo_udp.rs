@@ -39,6 +39,7 @@ impl ServoPort {
         })
     }
 
+    /// Where it listens.
     pub fn local_addr(&self) -> SocketAddr {
         self.addr
     }

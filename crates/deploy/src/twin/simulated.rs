@@ -56,6 +56,7 @@ impl Default for SimulatedSettings {
 }
 
 impl SimulatedSettings {
+    /// Checks every value; errors name the key.
     pub fn validate(&self) -> Result<()> {
         let [lo, hi] = self.latency_ms;
         if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi && hi <= 1000.0) {

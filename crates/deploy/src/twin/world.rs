@@ -34,6 +34,7 @@ use serde::Serialize;
 pub struct EpisodeResult {
     /// 1 for the first episode, counting every reset.
     pub number: u64,
+    /// The seed its objects were placed from.
     pub seed: u64,
     /// The task's success rule held at some control step.
     pub success: bool,
@@ -123,10 +124,12 @@ impl World {
         Ok(world)
     }
 
+    /// The arm task staged.
     pub fn env_id(&self) -> &str {
         &self.env_id
     }
 
+    /// The simulated scene (arm, gripper, table, objects).
     pub fn scene(&self) -> &Scene {
         self.inner.scene()
     }

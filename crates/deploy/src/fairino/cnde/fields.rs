@@ -10,10 +10,15 @@ use crate::{DeployError, Result};
 /// The scalar types that appear on the wire, all little-endian.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Scalar {
+    /// Unsigned byte.
     U8,
+    /// Unsigned 16-bit integer.
     U16,
+    /// Signed 32-bit integer.
     I32,
+    /// Unsigned 32-bit integer.
     U32,
+    /// Double (f64).
     F64,
 }
 
@@ -32,7 +37,9 @@ impl Scalar {
 /// A wire type: `count` packed values of one scalar type.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WireType {
+    /// The type of each value.
     pub scalar: Scalar,
+    /// How many values (6 for a joint or pose vector).
     pub count: usize,
 }
 
@@ -48,6 +55,7 @@ impl WireType {
 pub struct StateField {
     /// The name the client puts in its output config.
     pub name: &'static str,
+    /// Its type and size.
     pub wire: WireType,
 }
 
@@ -303,6 +311,7 @@ pub fn field(name: &str) -> Option<&'static StateField> {
 pub struct Layout {
     /// `(field, offset)` in request order.
     pub fields: Vec<(&'static StateField, usize)>,
+    /// Bytes of the whole payload.
     pub payload_len: usize,
 }
 

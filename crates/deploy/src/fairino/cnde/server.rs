@@ -23,6 +23,7 @@ pub type StateSource = Arc<dyn Fn() -> RobotState + Send + Sync>;
 /// What happens to one DATA frame that is due (fault injection).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FrameFate {
+    /// Sent on time.
     Send,
     /// Left out: the next frame comes a period later.
     Drop,

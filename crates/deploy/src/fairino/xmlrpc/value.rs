@@ -6,11 +6,17 @@ use std::fmt;
 /// `<nil/>` extension (Python sends it for `None`).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Value {
+    /// `<int>` or `<i4>`.
     Int(i32),
+    /// `<double>`.
     Double(f64),
+    /// `<boolean>`.
     Bool(bool),
+    /// `<string>`, or bare text in `<value>`.
     String(String),
+    /// `<array>`.
     Array(Vec<Value>),
+    /// `<nil/>`.
     Nil,
 }
 
@@ -121,7 +127,9 @@ impl From<Vec<Value>> for Value {
 /// An XML-RPC fault: the server's way of saying a call failed.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Fault {
+    /// `faultCode`.
     pub code: i32,
+    /// `faultString`.
     pub message: String,
 }
 
