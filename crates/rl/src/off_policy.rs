@@ -4,10 +4,11 @@
 //! The networks they share (twin critics, Polyak-averaged targets) are in
 //! [`crate::policies::critics`].
 
-use crate::algorithm::{TensorMap, rng_from_state, rng_state};
+use crate::algorithm::{Algorithm, TensorMap, rng_from_state, rng_state};
 use crate::buffers::{ReplayBuffer, ReplaySample};
 use crate::error::{ConfigSection, Result, RlError};
 use crate::nn::Adam;
+use crate::policies::ActorNet;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
 use fairgrasp_env::{VecStep, VectorEnv};
@@ -40,6 +41,105 @@ macro_rules! loop_settings {
     };
 }
 pub(crate) use loop_settings;
+
+/// An off-policy learner: its networks, optimisers and gradient step on the shared
+/// [`OffPolicyCore`]. Every `OffPolicy` is an [`Algorithm`] through the one impl below, so SAC
+/// and TD3 are only what differs between them.
+pub trait OffPolicy {
+    /// Short lowercase name, stored in saved models.
+    const NAME: &'static str;
+    /// The optimisers' states read from a checkpoint, not yet in place.
+    type Optimizers;
+
+    /// The shared experience side.
+    fn core(&self) -> &OffPolicyCore;
+
+    /// The acting network and the core together (acting draws from the core's stream).
+    fn actor_and_core(&mut self) -> (&dyn ActorNet, &mut OffPolicyCore);
+
+    /// `gradient_steps` gradient steps on replayed minibatches; the `train/*` means to log.
+    fn train(&mut self, gradient_steps: u64) -> Result<Vec<(&'static str, f32)>>;
+
+    /// The weights of every network (the model's `model.safetensors`).
+    fn networks(&self) -> TensorMap;
+
+    /// Loads weights saved by [`Self::networks`]; a bad tensor is an error naming it and
+    /// changes nothing.
+    fn load_networks(&mut self, weights: &TensorMap) -> Result<()>;
+
+    /// The optimisers under their checkpoint prefixes (`actor_opt.`, …).
+    fn optimizers(&self) -> Vec<(&'static str, &Adam)>;
+
+    /// The optimisers saved in `state`, read without changing anything.
+    fn read_optimizers(&self, state: &TensorMap) -> Result<Self::Optimizers>;
+
+    /// Puts optimisers read by [`Self::read_optimizers`] in place.
+    fn set_optimizers(&mut self, optimizers: Self::Optimizers);
+}
+
+impl<T: OffPolicy> Algorithm for T {
+    fn name(&self) -> &'static str {
+        T::NAME
+    }
+
+    fn log_interval(&self) -> u64 {
+        // One iteration per vector step: a log line per 1,000 steps is SB3's `log_interval`
+        // scale for off-policy learners.
+        1000
+    }
+
+    fn num_timesteps(&self) -> u64 {
+        self.core().num_timesteps
+    }
+
+    fn set_num_timesteps(&mut self, steps: u64) {
+        self.actor_and_core().1.num_timesteps = steps;
+    }
+
+    fn learn_iteration<V: VectorEnv>(
+        &mut self,
+        venv: &mut V,
+        _progress_remaining: f64,
+        on_step: &mut dyn FnMut(&VecStep<'_>),
+    ) -> Result<Vec<(&'static str, f32)>> {
+        let (actor, core) = self.actor_and_core();
+        let steps = core.collect(venv, on_step, |obs, rng| actor.act(obs, false, rng))?;
+        if steps == 0 {
+            return Ok(Vec::new());
+        }
+        self.train(steps)
+    }
+
+    fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        let (actor, core) = self.actor_and_core();
+        actor.act(obs, deterministic, &mut core.rng)
+    }
+
+    fn weights(&self) -> Result<TensorMap> {
+        Ok(self.networks())
+    }
+
+    fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
+        self.load_networks(weights)
+    }
+
+    fn training_state(&self) -> Result<TensorMap> {
+        self.core().training_state(&self.optimizers())
+    }
+
+    fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
+        // Everything is read into new values first, so a bad state changes nothing.
+        let optimizers = self.read_optimizers(state)?;
+        let core = self.actor_and_core().1;
+        core.read_state(state)?.apply(core, state)?;
+        self.set_optimizers(optimizers);
+        Ok(())
+    }
+
+    fn rng_mut(&mut self) -> &mut ChaCha8Rng {
+        &mut self.actor_and_core().1.rng
+    }
+}
 
 /// The checks SAC and TD3 share, in their configs' order.
 pub(crate) fn check_shared_settings(

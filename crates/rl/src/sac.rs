@@ -15,18 +15,19 @@
 //! The policy is a tanh-squashed Gaussian, so actions lie in `[-1, 1]`: the environments must
 //! act in that box (the driver wraps them in `RescaleAction`).
 
-use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
+use crate::algorithm::{TensorMap, load_grouped, varmap_tensors};
 use crate::buffers::ReplayBuffer;
 use crate::error::{ConfigSection, Result, RlError};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
+use crate::off_policy::{
+    Batch, OffPolicy, OffPolicyCore, check_shared_settings, load_adam, loop_settings,
+};
+use crate::policies::ActorNet;
 use crate::policies::features::FeaturesConfig;
 use crate::policies::net_config::NetConfig;
 use crate::policies::squashed_gaussian::{SquashedGaussianActor, SquashedGaussianPolicy};
 use candle_core::{DType, Device, Var};
 use candle_nn::{VarBuilder, VarMap};
-use fairgrasp_env::{VecStep, VectorEnv};
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// SAC hyperparameters (SB3's names and defaults where they exist).
@@ -351,56 +352,33 @@ impl Sac {
     }
 }
 
-impl Algorithm for Sac {
-    fn name(&self) -> &'static str {
-        "sac"
+impl OffPolicy for Sac {
+    const NAME: &'static str = "sac";
+    /// Actor, critics and (when α is learnt) log α.
+    type Optimizers = (Adam, Adam, Option<Adam>);
+
+    fn core(&self) -> &OffPolicyCore {
+        &self.core
     }
 
-    fn log_interval(&self) -> u64 {
-        1000
+    fn actor_and_core(&mut self) -> (&dyn ActorNet, &mut OffPolicyCore) {
+        (&self.nets.policy.actor, &mut self.core)
     }
 
-    fn num_timesteps(&self) -> u64 {
-        self.core.num_timesteps
+    fn train(&mut self, gradient_steps: u64) -> Result<Vec<(&'static str, f32)>> {
+        Sac::train(self, gradient_steps)
     }
 
-    fn set_num_timesteps(&mut self, steps: u64) {
-        self.core.num_timesteps = steps;
+    fn networks(&self) -> TensorMap {
+        self.nets.weights()
     }
 
-    fn learn_iteration<V: VectorEnv>(
-        &mut self,
-        venv: &mut V,
-        _progress_remaining: f64,
-        on_step: &mut dyn FnMut(&VecStep<'_>),
-    ) -> Result<Vec<(&'static str, f32)>> {
-        let actor = &self.nets.policy.actor;
-        let steps = self
-            .core
-            .collect(venv, on_step, |obs, rng| actor.predict(obs, false, rng))?;
-        if steps == 0 {
-            return Ok(Vec::new());
-        }
-        self.train(steps)
-    }
-
-    fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
-        self.nets
-            .policy
-            .actor
-            .predict(obs, deterministic, &mut self.core.rng)
-    }
-
-    fn weights(&self) -> Result<TensorMap> {
-        Ok(self.nets.weights())
-    }
-
-    fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
+    fn load_networks(&mut self, weights: &TensorMap) -> Result<()> {
         let (od, ad) = (self.core.obs_dim, self.core.act_dim);
         self.nets.load_weights(weights, od, ad, &self.config)
     }
 
-    fn training_state(&self) -> Result<TensorMap> {
+    fn optimizers(&self) -> Vec<(&'static str, &Adam)> {
         let mut optimizers = vec![
             ("actor_opt.", &self.actor_opt),
             ("critic_opt.", &self.critic_opt),
@@ -408,11 +386,10 @@ impl Algorithm for Sac {
         if let Some(opt) = &self.alpha_opt {
             optimizers.push(("alpha_opt.", opt));
         }
-        self.core.training_state(&optimizers)
+        optimizers
     }
 
-    fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
-        // Everything is read into new values first, so a bad state changes nothing.
+    fn read_optimizers(&self, state: &TensorMap) -> Result<Self::Optimizers> {
         let lr = self.config.learning_rate;
         let policy = &self.nets.policy;
         let actor_opt = load_adam(state, "actor_opt.", &policy.actor.varmap, lr)?;
@@ -421,21 +398,19 @@ impl Algorithm for Sac {
             Some((varmap, _)) => Some(load_adam(state, "alpha_opt.", varmap, lr)?),
             None => None,
         };
-        self.core.read_state(state)?.apply(&mut self.core, state)?;
-        self.actor_opt = actor_opt;
-        self.critic_opt = critic_opt;
-        self.alpha_opt = alpha_opt;
-        Ok(())
+        Ok((actor_opt, critic_opt, alpha_opt))
     }
 
-    fn rng_mut(&mut self) -> &mut ChaCha8Rng {
-        &mut self.core.rng
+    fn set_optimizers(&mut self, (actor, critic, alpha): Self::Optimizers) {
+        (self.actor_opt, self.critic_opt, self.alpha_opt) = (actor, critic, alpha);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::algorithm::Algorithm;
+    use fairgrasp_env::VectorEnv;
     use crate::off_policy::test_support::{
         assert_training_state_resumes, assert_validate_names_keys, fill_replay, pendulums,
         snapshot, unit_box_error, weights_of,

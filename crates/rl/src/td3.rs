@@ -13,16 +13,17 @@
 //!
 //! `d` is termination only: a truncated episode is bootstrapped from its real last observation.
 
-use crate::algorithm::{Algorithm, TensorMap, load_grouped, varmap_tensors};
+use crate::algorithm::{TensorMap, load_grouped, varmap_tensors};
 use crate::error::{ConfigSection, Result};
 use crate::nn::{Activation, Adam};
-use crate::off_policy::{Batch, OffPolicyCore, check_shared_settings, load_adam, loop_settings};
+use crate::off_policy::{
+    Batch, OffPolicy, OffPolicyCore, check_shared_settings, load_adam, loop_settings,
+};
+use crate::policies::ActorNet;
 use crate::policies::deterministic::{DeterministicActor, DeterministicPolicy};
 use crate::policies::features::FeaturesConfig;
 use crate::policies::net_config::NetConfig;
 use candle_core::Tensor;
-use fairgrasp_env::{VecStep, VectorEnv};
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 /// TD3 hyperparameters (SB3's names; the paper's noise settings).
@@ -238,54 +239,32 @@ impl Td3 {
     }
 }
 
-impl Algorithm for Td3 {
-    fn name(&self) -> &'static str {
-        "td3"
+impl OffPolicy for Td3 {
+    const NAME: &'static str = "td3";
+    /// Actor and critics.
+    type Optimizers = (Adam, Adam);
+
+    fn core(&self) -> &OffPolicyCore {
+        &self.core
     }
 
-    fn log_interval(&self) -> u64 {
-        1000
+    fn actor_and_core(&mut self) -> (&dyn ActorNet, &mut OffPolicyCore) {
+        (&self.policy.actor, &mut self.core)
     }
 
-    fn num_timesteps(&self) -> u64 {
-        self.core.num_timesteps
+    fn train(&mut self, gradient_steps: u64) -> Result<Vec<(&'static str, f32)>> {
+        Td3::train(self, gradient_steps)
     }
 
-    fn set_num_timesteps(&mut self, steps: u64) {
-        self.core.num_timesteps = steps;
-    }
-
-    fn learn_iteration<V: VectorEnv>(
-        &mut self,
-        venv: &mut V,
-        _progress_remaining: f64,
-        on_step: &mut dyn FnMut(&VecStep<'_>),
-    ) -> Result<Vec<(&'static str, f32)>> {
-        let actor = &self.policy.actor;
-        let steps = self
-            .core
-            .collect(venv, on_step, |obs, rng| actor.predict(obs, false, rng))?;
-        if steps == 0 {
-            return Ok(Vec::new());
-        }
-        self.train(steps)
-    }
-
-    fn predict(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
-        self.policy
-            .actor
-            .predict(obs, deterministic, &mut self.core.rng)
-    }
-
-    fn weights(&self) -> Result<TensorMap> {
+    fn networks(&self) -> TensorMap {
         let mut out = TensorMap::new();
         for (_, varmap) in self.policy.groups() {
             out.extend(varmap_tensors(varmap, ""));
         }
-        Ok(out)
+        out
     }
 
-    fn load_weights(&mut self, weights: &TensorMap) -> Result<()> {
+    fn load_networks(&mut self, weights: &TensorMap) -> Result<()> {
         let scratch = DeterministicPolicy::zeroed(
             self.core.obs_dim,
             self.core.act_dim,
@@ -295,32 +274,29 @@ impl Algorithm for Td3 {
         load_grouped(&self.policy.groups(), &scratch.groups(), weights)
     }
 
-    fn training_state(&self) -> Result<TensorMap> {
-        self.core.training_state(&[
+    fn optimizers(&self) -> Vec<(&'static str, &Adam)> {
+        vec![
             ("actor_opt.", &self.actor_opt),
             ("critic_opt.", &self.critic_opt),
-        ])
+        ]
     }
 
-    fn load_training_state(&mut self, state: &TensorMap) -> Result<()> {
-        // Everything is read into new values first, so a bad state changes nothing.
+    fn read_optimizers(&self, state: &TensorMap) -> Result<Self::Optimizers> {
         let lr = self.config.learning_rate;
         let actor_opt = load_adam(state, "actor_opt.", &self.policy.actor.varmap, lr)?;
         let critic_opt = load_adam(state, "critic_opt.", &self.policy.critics.online.varmap, lr)?;
-        self.core.read_state(state)?.apply(&mut self.core, state)?;
-        self.actor_opt = actor_opt;
-        self.critic_opt = critic_opt;
-        Ok(())
+        Ok((actor_opt, critic_opt))
     }
 
-    fn rng_mut(&mut self) -> &mut ChaCha8Rng {
-        &mut self.core.rng
+    fn set_optimizers(&mut self, (actor, critic): Self::Optimizers) {
+        (self.actor_opt, self.critic_opt) = (actor, critic);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::algorithm::Algorithm;
     use crate::off_policy::test_support::{
         assert_training_state_resumes, assert_validate_names_keys, fill_replay, group, pendulums,
         unit_box_error, weights_of,

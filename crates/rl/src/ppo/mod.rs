@@ -112,6 +112,117 @@ impl PpoConfig {
     }
 }
 
+/// The rollout buffer as tensors, for the loss through candle's autograd.
+struct RolloutTensors {
+    obs: Tensor,
+    /// The observations followed by the privileged values, with a privileged critic.
+    critic_obs: Option<Tensor>,
+    actions: Tensor,
+    log_probs: Tensor,
+    advantages: Tensor,
+    returns: Tensor,
+    values: Tensor,
+}
+
+impl RolloutTensors {
+    fn new(b: &RolloutBuffer) -> Result<Self> {
+        let total = b.len();
+        let dev = Device::Cpu;
+        let obs = Tensor::from_slice(
+            &b.observations[..total * b.obs_dim],
+            (total, b.obs_dim),
+            &dev,
+        )?;
+        let critic_obs = match b.privileged_dim {
+            0 => None,
+            pd => {
+                let p = Tensor::from_slice(&b.privileged[..total * pd], (total, pd), &dev)?;
+                Some(Tensor::cat(&[&obs, &p], 1)?)
+            }
+        };
+        let column = |v: &[f32]| Tensor::from_slice(&v[..total], total, &dev);
+        Ok(Self {
+            actions: Tensor::from_slice(&b.actions[..total * b.act_dim], (total, b.act_dim), &dev)?,
+            log_probs: column(&b.log_probs)?,
+            advantages: column(&b.advantages)?,
+            returns: column(&b.returns)?,
+            values: column(&b.values)?,
+            obs,
+            critic_obs,
+        })
+    }
+}
+
+/// PPO's loss on the minibatch `batch` of `rollout` through candle's autograd, with its
+/// statistics: the general path, for the settings the written-out loss does not compute.
+fn tensor_loss(
+    policy: &ActorCritic,
+    c: &PpoConfig,
+    rollout: &RolloutTensors,
+    batch: &[u32],
+) -> Result<(MinibatchStats, Tensor)> {
+    let idx = Tensor::from_slice(batch, batch.len(), &Device::Cpu)?;
+    let obs = rollout.obs.index_select(&idx, 0)?;
+    let actions = rollout.actions.index_select(&idx, 0)?;
+    let old_logp = rollout.log_probs.index_select(&idx, 0)?;
+    let mut adv = rollout.advantages.index_select(&idx, 0)?;
+    if c.normalize_advantage && batch.len() > 1 {
+        let mean = adv.mean_all()?;
+        let std = adv.broadcast_sub(&mean)?.sqr()?.mean_all()?.sqrt()?;
+        adv = adv.broadcast_sub(&mean)?.broadcast_div(&(std + 1e-8)?)?;
+    }
+    let returns = rollout.returns.index_select(&idx, 0)?;
+
+    // log π(a|s) and V(s) of the current policy.
+    let critic_obs = match &rollout.critic_obs {
+        Some(all) => Some(all.index_select(&idx, 0)?),
+        None => None,
+    };
+    let (dist, values) = policy.forward(&obs, critic_obs.as_ref())?;
+    let logp = dist.log_prob(&actions)?;
+    let log_ratio = (&logp - &old_logp)?;
+    let ratio = log_ratio.exp()?;
+
+    // Clipped surrogate objective.
+    let surrogate1 = (&ratio * &adv)?;
+    let surrogate2 = (ratio.clamp(1.0 - c.clip_range, 1.0 + c.clip_range)? * &adv)?;
+    let policy_loss = surrogate1.minimum(&surrogate2)?.mean_all()?.neg()?;
+
+    // Value loss, optionally clipped around the old values.
+    let value_loss = match c.clip_range_vf {
+        None => (&values - &returns)?.sqr()?.mean_all()?,
+        Some(eps) => {
+            let old = rollout.values.index_select(&idx, 0)?;
+            let clipped = (&old + (&values - &old)?.clamp(-eps, eps)?)?;
+            let a = (&values - &returns)?.sqr()?;
+            let b = (&clipped - &returns)?.sqr()?;
+            a.maximum(&b)?.mean_all()?
+        }
+    };
+    let entropy = dist.entropy()?.mean_all()?;
+    let loss =
+        ((&policy_loss + (&value_loss * c.vf_coef as f64)?)? - (&entropy * c.ent_coef as f64)?)?;
+
+    // Diagnostics before the step (what SB3 logs).
+    let approx_kl = ((&ratio - 1.0)? - &log_ratio)?
+        .mean_all()?
+        .to_scalar::<f32>()?;
+    let clip_fraction = (&ratio - 1.0)?
+        .abs()?
+        .gt(c.clip_range as f64)?
+        .to_dtype(DType::F32)?
+        .mean_all()?
+        .to_scalar::<f32>()?;
+    let stats = MinibatchStats {
+        policy_loss: policy_loss.to_scalar::<f32>()?,
+        value_loss: value_loss.to_scalar::<f32>()?,
+        entropy: entropy.to_scalar::<f32>()?,
+        approx_kl,
+        clip_fraction,
+    };
+    Ok((stats, loss))
+}
+
 /// The acting network of a saved model: the actor-critic (its value head included, so that
 /// every tensor of `weights` is checked).
 pub(crate) fn load_actor(
@@ -475,41 +586,17 @@ impl Ppo {
         self.optimizer.lr = lr;
         let b = &self.buffer;
         let total = b.len();
-        let dev = Device::Cpu;
-        let obs_all = Tensor::from_slice(
-            &b.observations[..total * b.obs_dim],
-            (total, b.obs_dim),
-            &dev,
-        )?;
-        let privileged_all = match b.privileged_dim {
-            0 => None,
-            pd => {
-                let p = Tensor::from_slice(&b.privileged[..total * pd], (total, pd), &dev)?;
-                Some(Tensor::cat(&[&obs_all, &p], 1)?)
-            }
-        };
-        let act_all =
-            Tensor::from_slice(&b.actions[..total * b.act_dim], (total, b.act_dim), &dev)?;
-        let logp_all = Tensor::from_slice(&b.log_probs[..total], total, &dev)?;
-        let adv_all = Tensor::from_slice(&b.advantages[..total], total, &dev)?;
-        let ret_all = Tensor::from_slice(&b.returns[..total], total, &dev)?;
-        let val_all = Tensor::from_slice(&b.values[..total], total, &dev)?;
         let explained_variance = explained_variance(&b.values[..total], &b.returns[..total]);
-
-        let mut indices: Vec<u32> = (0..total as u32).collect();
-        let mut stats = UpdateStats {
-            learning_rate: lr,
-            explained_variance,
-            ..UpdateStats::default()
-        };
-        let (mut pg_sum, mut v_sum, mut ent_sum, mut kl_sum, mut clip_sum, mut gn_sum, mut count) =
-            (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
         // The written-out loss computes the default actor-critic's (tanh heads on flat
-        // observations, no value clipping); other settings run the tensor code below.
-        let fused = self.written_out_loss
+        // observations, no value clipping); other settings run the tensor code.
+        let written_out = self.written_out_loss
             && c.activation == Activation::Tanh
             && c.clip_range_vf.is_none()
             && c.features == FeaturesConfig::Flatten {};
+        let rollout = match written_out {
+            true => None,
+            false => Some(RolloutTensors::new(&self.buffer)?),
+        };
         let coefficients = LossCoefficients {
             clip_range: c.clip_range,
             ent_coef: c.ent_coef,
@@ -518,110 +605,61 @@ impl Ppo {
         };
         let names: Vec<String> = self.optimizer.vars().map(|(n, _)| n.to_string()).collect();
         let names: Vec<&str> = names.iter().map(String::as_str).collect();
+
+        let mut indices: Vec<u32> = (0..total as u32).collect();
+        let mut stats = UpdateStats {
+            learning_rate: lr,
+            explained_variance,
+            ..UpdateStats::default()
+        };
+        let (mut sum, mut gn_sum, mut count) = (MinibatchStats::default(), 0.0, 0usize);
         'epochs: for epoch in 0..c.n_epochs {
             indices.shuffle(&mut self.rng);
             for batch in indices.chunks(c.batch_size) {
-                if fused {
-                    self.minibatch.gather(&self.buffer, batch);
-                    let (pi, vf) = self.policy.heads();
-                    let s: MinibatchStats = self.fused.compute(
-                        (pi, vf, self.policy.log_std()),
-                        &coefficients,
-                        &self.minibatch.as_minibatch(),
-                    )?;
-                    if let Some(target) = c.target_kl
-                        && s.approx_kl > 1.5 * target
-                    {
-                        stats.epochs_run = epoch;
-                        break 'epochs;
+                let (s, loss) = match &rollout {
+                    None => {
+                        self.minibatch.gather(&self.buffer, batch);
+                        let (pi, vf) = self.policy.heads();
+                        let s = self.fused.compute(
+                            (pi, vf, self.policy.log_std()),
+                            &coefficients,
+                            &self.minibatch.as_minibatch(),
+                        )?;
+                        (s, None)
                     }
-                    let grads = self.fused.gradients(&names);
-                    let grad_norm = self.optimizer.step_with(&grads, c.max_grad_norm)?;
-                    pg_sum += s.policy_loss;
-                    v_sum += s.value_loss;
-                    ent_sum += s.entropy;
-                    kl_sum += s.approx_kl;
-                    clip_sum += s.clip_fraction;
-                    gn_sum += grad_norm as f32;
-                    count += 1;
-                    continue;
-                }
-                let idx = Tensor::from_slice(batch, batch.len(), &dev)?;
-                let obs = obs_all.index_select(&idx, 0)?;
-                let actions = act_all.index_select(&idx, 0)?;
-                let old_logp = logp_all.index_select(&idx, 0)?;
-                let mut adv = adv_all.index_select(&idx, 0)?;
-                if c.normalize_advantage && batch.len() > 1 {
-                    let mean = adv.mean_all()?;
-                    let std = adv.broadcast_sub(&mean)?.sqr()?.mean_all()?.sqrt()?;
-                    adv = adv.broadcast_sub(&mean)?.broadcast_div(&(std + 1e-8)?)?;
-                }
-                let returns = ret_all.index_select(&idx, 0)?;
-
-                // log π(a|s) and V(s) of the current policy.
-                let critic_obs = match &privileged_all {
-                    Some(all) => Some(all.index_select(&idx, 0)?),
-                    None => None,
-                };
-                let (dist, values) = self.policy.forward(&obs, critic_obs.as_ref())?;
-                let logp = dist.log_prob(&actions)?;
-                let log_ratio = (&logp - &old_logp)?;
-                let ratio = log_ratio.exp()?;
-
-                // Clipped surrogate objective.
-                let surrogate1 = (&ratio * &adv)?;
-                let surrogate2 = (ratio.clamp(1.0 - c.clip_range, 1.0 + c.clip_range)? * &adv)?;
-                let policy_loss = surrogate1.minimum(&surrogate2)?.mean_all()?.neg()?;
-
-                // Value loss, optionally clipped around the old values.
-                let value_loss = match c.clip_range_vf {
-                    None => (&values - &returns)?.sqr()?.mean_all()?,
-                    Some(eps) => {
-                        let old = val_all.index_select(&idx, 0)?;
-                        let clipped = (&old + (&values - &old)?.clamp(-eps, eps)?)?;
-                        let a = (&values - &returns)?.sqr()?;
-                        let b = (&clipped - &returns)?.sqr()?;
-                        a.maximum(&b)?.mean_all()?
+                    Some(rollout) => {
+                        let (s, loss) = tensor_loss(&self.policy, &c, rollout, batch)?;
+                        (s, Some(loss))
                     }
                 };
-                let entropy = dist.entropy()?.mean_all()?;
-                let loss = ((&policy_loss + (&value_loss * c.vf_coef as f64)?)?
-                    - (&entropy * c.ent_coef as f64)?)?;
-
-                // Diagnostics before the step (what SB3 logs).
-                let approx_kl = ((&ratio - 1.0)? - &log_ratio)?
-                    .mean_all()?
-                    .to_scalar::<f32>()?;
-                let clip_fraction = (&ratio - 1.0)?
-                    .abs()?
-                    .gt(c.clip_range as f64)?
-                    .to_dtype(DType::F32)?
-                    .mean_all()?
-                    .to_scalar::<f32>()?;
+                // SB3's early stop, on the KL divergence before the step.
                 if let Some(target) = c.target_kl
-                    && approx_kl > 1.5 * target
+                    && s.approx_kl > 1.5 * target
                 {
                     stats.epochs_run = epoch;
                     break 'epochs;
                 }
-                let grad_norm = self.optimizer.backward_step(&loss, c.max_grad_norm)?;
-
-                pg_sum += policy_loss.to_scalar::<f32>()?;
-                v_sum += value_loss.to_scalar::<f32>()?;
-                ent_sum += entropy.to_scalar::<f32>()?;
-                kl_sum += approx_kl;
-                clip_sum += clip_fraction;
+                let grad_norm = match loss {
+                    None => (self.optimizer)
+                        .step_with(&self.fused.gradients(&names), c.max_grad_norm)?,
+                    Some(loss) => self.optimizer.backward_step(&loss, c.max_grad_norm)?,
+                };
+                sum.policy_loss += s.policy_loss;
+                sum.value_loss += s.value_loss;
+                sum.entropy += s.entropy;
+                sum.approx_kl += s.approx_kl;
+                sum.clip_fraction += s.clip_fraction;
                 gn_sum += grad_norm as f32;
                 count += 1;
             }
             stats.epochs_run = epoch + 1;
         }
         let n = count.max(1) as f32;
-        stats.policy_loss = pg_sum / n;
-        stats.value_loss = v_sum / n;
-        stats.entropy = ent_sum / n;
-        stats.approx_kl = kl_sum / n;
-        stats.clip_fraction = clip_sum / n;
+        stats.policy_loss = sum.policy_loss / n;
+        stats.value_loss = sum.value_loss / n;
+        stats.entropy = sum.entropy / n;
+        stats.approx_kl = sum.approx_kl / n;
+        stats.clip_fraction = sum.clip_fraction / n;
         stats.grad_norm = gn_sum / n;
         stats.std = self
             .policy
