@@ -2,6 +2,7 @@
 //! which standard deviation applies to which entries without a hand-kept index table.
 
 use crate::arm::config::ObservationNoise;
+use crate::arm::state::ArmState;
 use fairgrasp_sim::rapier3d::na::Vector3;
 use std::ops::Range;
 
@@ -123,4 +124,40 @@ impl<'a> ObsWriter<'a> {
     pub fn is_empty(&self) -> bool {
         self.out.is_empty()
     }
+}
+
+/// The `rich` layout around object `i` (33 values plus the previous action; docs/tasks.md):
+/// joints, velocities, TCP position and orientation (two rotation-matrix columns: continuous,
+/// unlike Euler angles near a top-down pose), the object's position, its yaw relative to the
+/// TCP with the cube's fourfold symmetry folded out, the TCP→object vector, the lift, the
+/// gripper opening, the pad contacts and the previous action.
+pub(crate) fn rich_observation(
+    s: &ArmState,
+    i: usize,
+    previous_action: &[f32],
+    out: &mut ObsWriter,
+) {
+    use NoiseGroup::*;
+    let object = &s.objects[i];
+    out.push(JointPosition, &s.q);
+    out.push(JointVelocity, &s.qd);
+    out.push3(EePosition, &s.tcp.translation.vector);
+    let m = s.tcp.rotation.to_rotation_matrix();
+    for c in 0..2 {
+        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
+    }
+    out.push3(ObjectPosition, &object.pose.translation.vector);
+    let yaw = s.relative_yaw(i);
+    out.push(
+        ObjectOrientation,
+        &[(4.0 * yaw).sin() as f32, (4.0 * yaw).cos() as f32],
+    );
+    out.push3(ObjectPosition, &s.tcp_to_object(i));
+    out.push1(ObjectPosition, s.lift(i) as f32);
+    out.push1(Gripper, s.gripper_opening);
+    out.push(
+        None,
+        &object.pad_contacts.map(|c| if c { 1.0 } else { 0.0 }),
+    );
+    out.push(None, previous_action);
 }

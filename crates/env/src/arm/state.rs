@@ -82,6 +82,11 @@ impl ArmState {
         self.objects[i].pose.translation.vector - self.tcp.translation.vector
     }
 
+    /// Object `i`'s yaw relative to the TCP's (rad).
+    pub fn relative_yaw(&self, i: usize) -> f64 {
+        self.objects[i].pose.rotation.euler_angles().2 - self.tcp.rotation.euler_angles().2
+    }
+
     /// Lift of object `i` above its resting height (m).
     pub fn lift(&self, i: usize) -> f64 {
         self.objects[i].pose.translation.z - self.objects[i].rest_z

@@ -14,6 +14,7 @@ use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings,
     SuccessJudge, Task, TaskFlags, TaskSettings,
 };
+use crate::arm::observation::rich_observation;
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
@@ -300,47 +301,6 @@ pub(crate) fn off_centre(state: &ArmState, i: usize) -> Option<f64> {
     between.then_some(local.y)
 }
 
-/// Object `i`'s yaw relative to the TCP's (rad).
-pub(crate) fn relative_yaw(state: &ArmState, i: usize) -> f64 {
-    state.objects[i].pose.rotation.euler_angles().2 - state.tcp.rotation.euler_angles().2
-}
-
-/// The `rich` layout around object `i` (33 values plus the previous action; docs/tasks.md):
-/// joints, velocities, TCP position and orientation (two rotation-matrix columns: continuous,
-/// unlike Euler angles near a top-down pose), the object's position, its yaw relative to the
-/// TCP with the cube's fourfold symmetry folded out, the TCP→object vector, the lift, the
-/// gripper opening, the pad contacts and the previous action.
-pub(crate) fn rich_observation(
-    s: &ArmState,
-    i: usize,
-    previous_action: &[f32],
-    out: &mut ObsWriter,
-) {
-    use NoiseGroup::*;
-    let object = &s.objects[i];
-    out.push(JointPosition, &s.q);
-    out.push(JointVelocity, &s.qd);
-    out.push3(EePosition, &s.tcp.translation.vector);
-    let m = s.tcp.rotation.to_rotation_matrix();
-    for c in 0..2 {
-        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
-    }
-    out.push3(ObjectPosition, &object.pose.translation.vector);
-    let yaw = relative_yaw(s, i);
-    out.push(
-        ObjectOrientation,
-        &[(4.0 * yaw).sin() as f32, (4.0 * yaw).cos() as f32],
-    );
-    out.push3(ObjectPosition, &s.tcp_to_object(i));
-    out.push1(ObjectPosition, s.lift(i) as f32);
-    out.push1(Gripper, s.gripper_opening);
-    out.push(
-        None,
-        &object.pad_contacts.map(|c| if c { 1.0 } else { 0.0 }),
-    );
-    out.push(None, previous_action);
-}
-
 /// The grasp's flags for one step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GraspFlags {
@@ -431,7 +391,7 @@ impl Task for Grasp {
             ObservationPreset::Rich => {
                 rich_observation(s, 0, previous_action, out);
                 if self.random_shapes {
-                    let yaw = relative_yaw(s, 0);
+                    let yaw = s.relative_yaw(0);
                     out.push(None, &object.half_extents);
                     out.push(
                         ObjectOrientation,
@@ -496,7 +456,7 @@ impl Task for Grasp {
                 if r.align > 0.0 {
                     let quarter = std::f64::consts::FRAC_PI_4;
                     let yaw =
-                        (relative_yaw(state, 0) + quarter).rem_euclid(2.0 * quarter) - quarter;
+                        (state.relative_yaw(0) + quarter).rem_euclid(2.0 * quarter) - quarter;
                     let near = 1.0 - (4.0 * distance).tanh();
                     terms.set("align", -r.align * (yaw.abs() / quarter) as f32 * near);
                 }

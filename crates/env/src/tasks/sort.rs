@@ -13,7 +13,7 @@ use crate::arm::{
 use crate::config::{check_at_least_one, check_non_negative};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
-use crate::tasks::grasp::rich_observation;
+use crate::arm::observation::rich_observation;
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::{BinConfig, ObjectConfig, ObjectShape, Scene, SceneConfig};
 use rand::Rng;
