@@ -9,19 +9,29 @@ use std::collections::HashMap;
 /// (`index = step * n_envs + env`), like SB3's `RolloutBuffer`.
 #[derive(Clone, Debug)]
 pub struct RolloutBuffer {
+    /// Steps per environment (SB3's `n_steps`).
     pub n_steps: usize,
+    /// Environments stepped together.
     pub n_envs: usize,
+    /// Observation width.
     pub obs_dim: usize,
+    /// Action width.
     pub act_dim: usize,
+    /// `n_steps·n_envs × obs_dim`, row-major.
     pub observations: Vec<f32>,
     /// Actions as sampled by the policy (before clipping to the action space).
     pub actions: Vec<f32>,
+    /// One per transition; truncated episodes' last rewards include the bootstrap `γ·V`.
     pub rewards: Vec<f32>,
     /// Whether the observation at this step starts a new episode (SB3's `episode_starts`).
     pub episode_starts: Vec<bool>,
+    /// The value network's estimate of each observation.
     pub values: Vec<f32>,
+    /// Log-probability (nats) of each action under the policy that took it.
     pub log_probs: Vec<f32>,
+    /// GAE advantages, set by [`Self::compute_returns_and_advantages`].
     pub advantages: Vec<f32>,
+    /// Advantages plus values: the value network's targets.
     pub returns: Vec<f32>,
     /// Values of the privileged state per transition (0: no privileged critic).
     pub privileged_dim: usize,
@@ -31,6 +41,7 @@ pub struct RolloutBuffer {
 }
 
 impl RolloutBuffer {
+    /// An empty buffer for `n_steps` steps of `n_envs` environments, without privileged state.
     pub fn new(n_steps: usize, n_envs: usize, obs_dim: usize, act_dim: usize) -> Self {
         let n = n_steps * n_envs;
         Self {
@@ -64,14 +75,17 @@ impl RolloutBuffer {
         self.len * self.n_envs
     }
 
+    /// Whether no step is stored.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
 
+    /// Whether all `n_steps` steps are stored.
     pub fn is_full(&self) -> bool {
         self.len == self.n_steps
     }
 
+    /// Forgets the stored steps (the storage is kept).
     pub fn clear(&mut self) {
         self.len = 0;
     }
@@ -148,8 +162,11 @@ impl RolloutBuffer {
 /// A ring buffer of transitions for off-policy learning (SB3's `ReplayBuffer`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReplayBuffer {
+    /// Transitions held before the oldest are overwritten (SB3's `buffer_size`).
     pub capacity: usize,
+    /// Observation width.
     pub obs_dim: usize,
+    /// Action width.
     pub act_dim: usize,
     observations: Vec<f32>,
     next_observations: Vec<f32>,
@@ -165,14 +182,21 @@ pub struct ReplayBuffer {
 /// A sampled minibatch, row-major.
 #[derive(Clone, Debug, Default)]
 pub struct ReplaySample {
+    /// `batch × obs_dim`.
     pub observations: Vec<f32>,
+    /// `batch × act_dim`, as taken.
     pub actions: Vec<f32>,
+    /// One per transition.
     pub rewards: Vec<f32>,
+    /// `batch × obs_dim`: the observation after the action (the real final one where an
+    /// episode ended).
     pub next_observations: Vec<f32>,
+    /// 1.0 where the next observation is terminal (no bootstrap), else 0.0.
     pub dones: Vec<f32>,
 }
 
 impl ReplayBuffer {
+    /// An empty buffer of `capacity` transitions.
     pub fn new(capacity: usize, obs_dim: usize, act_dim: usize) -> Self {
         Self {
             capacity,
@@ -188,6 +212,7 @@ impl ReplayBuffer {
         }
     }
 
+    /// Transitions stored (at most `capacity`).
     pub fn len(&self) -> usize {
         if self.full {
             self.capacity
@@ -196,6 +221,7 @@ impl ReplayBuffer {
         }
     }
 
+    /// Whether no transition is stored.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

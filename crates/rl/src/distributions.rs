@@ -53,10 +53,12 @@ impl DiagGaussian {
         Ok(Self { mean, log_std })
     }
 
+    /// The means, `batch × act_dim`.
     pub fn mean(&self) -> &Tensor {
         &self.mean
     }
 
+    /// The log standard deviations, `act_dim` or `batch × act_dim`.
     pub fn log_std(&self) -> &Tensor {
         &self.log_std
     }

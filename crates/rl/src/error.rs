@@ -5,19 +5,30 @@ use fairgrasp_env::EnvError;
 /// Errors of the learning code.
 #[derive(Debug, thiserror::Error)]
 pub enum RlError {
+    /// An environment failed.
     #[error(transparent)]
     Env(#[from] EnvError),
+    /// A network (candle) operation failed.
     #[error("network: {0}")]
     Candle(#[from] candle_core::Error),
+    /// A bad setting (unparsable, unknown, out of range, unusable with the environment); names
+    /// the key.
     #[error("invalid setting `{key}`: {problem}")]
-    Config { key: String, problem: String },
+    Config {
+        /// The setting's key, e.g. `ppo.batch_size`.
+        key: String,
+        /// Why it is refused.
+        problem: String,
+    },
     /// A saved model or checkpoint that cannot be used (corrupt, incomplete, mismatched).
     #[error("{0}")]
     Model(String),
+    /// Any other failure (file I/O, a missing network parameter, …), in words.
     #[error("{0}")]
     Other(String),
 }
 
+/// Result alias for the learning code.
 pub type Result<T, E = RlError> = std::result::Result<T, E>;
 
 /// Checks of one config section's settings (`[sac]`, …), each error naming `{section}.{key}`.

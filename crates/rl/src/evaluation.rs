@@ -13,9 +13,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// Result of an evaluation.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct EvalResult {
+    /// Share of the episodes that succeeded, in [0, 1].
     pub success_rate: f32,
+    /// Mean undiscounted return of the environment's own rewards.
     pub mean_return: f32,
+    /// Mean episode length (steps).
     pub mean_length: f32,
+    /// Episodes played.
     pub episodes: u32,
     /// The mean over episodes of each of the task's extras at the final step
     /// (`fraction_sorted`, `lift`, …).

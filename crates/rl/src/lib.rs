@@ -11,6 +11,8 @@
 //! network sizes measured 4.8 s with candle against 6.7 s with burn-ndarray, and candle builds in
 //! 2.7 min against 7.8 min (docs/training.md).
 
+#![warn(missing_docs)]
+
 pub mod algo;
 pub mod algorithm;
 pub mod buffers;

@@ -26,11 +26,14 @@ const V1_ENV_ID: &str = "FaArmGrasp-v0";
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelMeta {
+    /// Layout version of this file (see [`FORMAT_VERSION`]).
     pub format_version: u32,
     /// The algorithm and its settings: `"algo": "sac"` beside a `"sac"` object.
     #[serde(flatten)]
     pub algo: AlgoConfig,
+    /// Observation width.
     pub obs_dim: usize,
+    /// Action width.
     pub act_dim: usize,
     /// Id of the environment the model was trained on (`"FaArmGrasp-v0"`).
     pub env_id: String,
@@ -38,10 +41,12 @@ pub struct ModelMeta {
     pub env: serde_json::Value,
     /// Observation normalisation statistics (JSON of [`fairgrasp_env::wrappers::VecNormalizeState`]), if used.
     pub normalization: Option<String>,
+    /// Environment steps the model was trained for.
     pub num_timesteps: u64,
-    /// Seed and number of the training environments (to keep evaluation seeds apart).
+    /// Seed of the training environments (to keep evaluation seeds apart).
     #[serde(default)]
     pub train_seed: u64,
+    /// Number of training environments (likewise).
     #[serde(default)]
     pub n_envs: usize,
     /// Privileged values the value network reads after the observation (`ppo.privileged_critic`;

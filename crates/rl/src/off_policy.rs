@@ -21,10 +21,16 @@ pub(crate) mod test_support;
 /// The settings of the learn loop (each algorithm's config has them under SB3's names).
 #[derive(Clone, Copy, Debug)]
 pub struct LoopSettings {
+    /// Replay buffer capacity, in transitions (SB3's `buffer_size`); at least 1.
     pub buffer_size: usize,
+    /// Environment steps (all environments together) of uniformly random actions before
+    /// learning starts (SB3's `learning_starts`).
     pub learning_starts: u64,
+    /// Transitions per minibatch (SB3's `batch_size`); at least 1.
     pub batch_size: usize,
+    /// Update-to-data ratio: gradient steps per transition collected; positive.
     pub utd_ratio: f32,
+    /// Checkpoints hold the replay buffer, so a resumed run continues with it.
     pub save_replay_buffer: bool,
 }
 
@@ -162,10 +168,15 @@ pub(crate) fn check_shared_settings(
 /// A minibatch as tensors: `obs`, `next_obs` are `batch × obs_dim`, `actions` `batch × act_dim`,
 /// `rewards` and `not_done` (1 − terminated) `batch`.
 pub struct Batch {
+    /// Observations.
     pub obs: Tensor,
+    /// Actions taken.
     pub actions: Tensor,
+    /// Rewards.
     pub rewards: Tensor,
+    /// Observations after the actions.
     pub next_obs: Tensor,
+    /// 0 where the next observation is terminal, else 1.
     pub not_done: Tensor,
 }
 
@@ -173,22 +184,30 @@ pub struct Batch {
 pub struct OffPolicyCore {
     /// `"sac"` or `"td3"`: messages and the checkpoint keys' prefix (`sac.rng.seed`, …).
     name: &'static str,
+    /// The learn loop's settings.
     pub settings: LoopSettings,
+    /// The replay buffer.
     pub buffer: ReplayBuffer,
     /// Reused minibatch storage.
     sample: ReplaySample,
+    /// Random stream for exploration, minibatch sampling and noise.
     pub rng: ChaCha8Rng,
+    /// Environment steps taken so far (all environments together).
     pub num_timesteps: u64,
     /// Gradient steps owed but not yet taken (fractional when `utd_ratio × n_envs` is not an
     /// integer).
     pub grad_accumulator: f64,
     /// Gradient steps taken so far.
     pub n_updates: u64,
+    /// Observation width.
     pub obs_dim: usize,
+    /// Action width.
     pub act_dim: usize,
 }
 
 impl OffPolicyCore {
+    /// A core with an empty replay buffer and a stream seeded with `seed`; `name` (`"sac"`,
+    /// `"td3"`) prefixes its checkpoint keys. Errors on zero-width observations or actions.
     pub fn new(
         name: &'static str,
         settings: LoopSettings,

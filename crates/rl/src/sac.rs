@@ -34,14 +34,17 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SacConfig {
+    /// Adam's step size for every network (SB3's `learning_rate`); positive.
     pub learning_rate: f64,
     /// Replay buffer capacity (transitions).
     pub buffer_size: usize,
     /// Environment steps (all envs together) of uniformly random actions before learning.
     pub learning_starts: u64,
+    /// Transitions per minibatch (SB3's `batch_size`); at least 1.
     pub batch_size: usize,
     /// Polyak coefficient of the target critics.
     pub tau: f32,
+    /// Discount factor, in [0, 1].
     pub gamma: f32,
     /// Gradient steps per environment transition (update-to-data ratio).
     pub utd_ratio: f32,
@@ -53,6 +56,7 @@ pub struct SacConfig {
     pub target_entropy: Option<f32>,
     /// Hidden layers of the actor and of each critic.
     pub net_arch: Vec<usize>,
+    /// The activation after each hidden layer.
     pub activation: Activation,
     /// Save the replay buffer in checkpoints, so a resumed run keeps its experience.
     pub save_replay_buffer: bool,
@@ -211,6 +215,7 @@ struct StepStats {
 /// The SAC learner: networks and optimisers on the shared off-policy core (replay buffer,
 /// random stream, learn loop).
 pub struct Sac {
+    /// The hyperparameters.
     pub config: SacConfig,
     nets: Networks,
     actor_opt: Adam,
@@ -222,6 +227,9 @@ pub struct Sac {
 }
 
 impl Sac {
+    /// A learner for environments with `obs_dim` observation and `act_dim` action values
+    /// (`n_envs` of them), its networks and stream seeded with `seed`; fails on an invalid
+    /// configuration.
     pub fn new(
         config: SacConfig,
         obs_dim: usize,
@@ -410,13 +418,13 @@ impl OffPolicy for Sac {
 mod tests {
     use super::*;
     use crate::algorithm::Algorithm;
-    use fairgrasp_env::VectorEnv;
     use crate::off_policy::test_support::{
         assert_training_state_resumes, assert_validate_names_keys, fill_replay, pendulums,
         snapshot, unit_box_error, weights_of,
     };
     use candle_core::Tensor;
     use fairgrasp_env::Env;
+    use fairgrasp_env::VectorEnv;
     use fairgrasp_env::tasks::classic::Pendulum;
 
     fn small_config() -> SacConfig {

@@ -30,14 +30,17 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Td3Config {
+    /// Adam's step size for every network (SB3's `learning_rate`); positive.
     pub learning_rate: f64,
     /// Replay buffer capacity (transitions).
     pub buffer_size: usize,
     /// Environment steps (all envs together) of uniformly random actions before learning.
     pub learning_starts: u64,
+    /// Transitions per minibatch (SB3's `batch_size`); at least 1.
     pub batch_size: usize,
     /// Polyak coefficient of the targets.
     pub tau: f32,
+    /// Discount factor, in [0, 1].
     pub gamma: f32,
     /// Gradient steps per environment transition (update-to-data ratio).
     pub utd_ratio: f32,
@@ -51,6 +54,7 @@ pub struct Td3Config {
     pub action_noise: f32,
     /// Hidden layers of the actor and of each critic.
     pub net_arch: Vec<usize>,
+    /// The activation after each hidden layer.
     pub activation: Activation,
     /// Save the replay buffer in checkpoints, so a resumed run keeps its experience.
     pub save_replay_buffer: bool,
@@ -120,6 +124,7 @@ pub(crate) fn load_actor(
 /// The TD3 learner: networks and optimisers on the shared off-policy core (replay buffer,
 /// random stream, learn loop).
 pub struct Td3 {
+    /// The hyperparameters.
     pub config: Td3Config,
     policy: DeterministicPolicy,
     actor_opt: Adam,
@@ -128,6 +133,9 @@ pub struct Td3 {
 }
 
 impl Td3 {
+    /// A learner for environments with `obs_dim` observation and `act_dim` action values
+    /// (`n_envs` of them), its networks and stream seeded with `seed`; fails on an invalid
+    /// configuration.
     pub fn new(
         config: Td3Config,
         obs_dim: usize,

@@ -103,6 +103,7 @@ pub struct VarValues<'a> {
 }
 
 impl<'a> VarValues<'a> {
+    /// Read-locks each of `tensors` until dropped.
     pub fn new(tensors: impl IntoIterator<Item = &'a Tensor>) -> Self {
         Self {
             guards: tensors
@@ -125,9 +126,13 @@ impl<'a> VarValues<'a> {
 /// One linear layer's parameters: `weight` is `out × inp` row-major.
 #[derive(Clone, Copy)]
 pub struct LayerParams<'a> {
+    /// `out × inp`, row-major.
     pub weight: &'a [f32],
+    /// `out` values.
     pub bias: &'a [f32],
+    /// Input width.
     pub inp: usize,
+    /// Output width.
     pub out: usize,
 }
 

@@ -35,6 +35,8 @@ fn records(text: &str) -> impl Iterator<Item = (usize, Result<csv::StringRecord,
         })
 }
 
+/// Writes a run's `progress.csv`, keeping its rows in memory to rewrite the file when a
+/// column is added.
 pub struct CsvLogger {
     path: PathBuf,
     columns: Vec<String>,
@@ -113,6 +115,7 @@ impl CsvLogger {
         fairgrasp_env::atomic::write(&self.path, &text)
     }
 
+    /// The file written.
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -122,25 +125,38 @@ impl CsvLogger {
 /// cell is empty, as it is for every tag not logged in that row).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProgressLog {
+    /// The header's column names (the tags), in file order.
     pub columns: Vec<String>,
+    /// One entry per column in each row.
     pub rows: Vec<Vec<Option<f64>>>,
 }
 
 /// Why a `progress.csv` cannot be read; each names the file and, where it applies, the line.
 #[derive(Debug, thiserror::Error)]
 pub enum ProgressError {
+    /// The file cannot be read.
     #[error("cannot read {}: {source}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The I/O error.
         #[source]
         source: io::Error,
     },
+    /// The file has no header line.
     #[error("{}: empty file (no header line)", path.display())]
-    Empty { path: PathBuf },
+    Empty {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A line that does not parse: a bad header, a wrong number of cells, a non-number.
     #[error("{}:{line}: {problem}", path.display())]
     Garbled {
+        /// The file.
         path: PathBuf,
+        /// The line's number (1-based).
         line: usize,
+        /// What is wrong with it.
         problem: String,
     },
 }

@@ -142,9 +142,13 @@ impl Drop for TensorBoardWriter {
 /// One scalar read back from an event file.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScalarEvent {
+    /// The global step it was logged at (environment steps, in this crate's runs).
     pub step: i64,
+    /// When it was written, in seconds since the Unix epoch.
     pub wall_time: f64,
+    /// Its tag (`rollout/ep_rew_mean`, …).
     pub tag: String,
+    /// The value.
     pub value: f32,
 }
 

@@ -25,9 +25,13 @@ pub struct Adam {
     /// First and second moment estimates, row-major like their variables.
     first: Vec<Vec<f32>>,
     second: Vec<Vec<f32>>,
+    /// Step size (PPO's learning-rate schedule sets it before each update).
     pub lr: f64,
+    /// Decay rate of the first moment estimates (0.9).
     pub beta1: f64,
+    /// Decay rate of the second moment estimates (0.999).
     pub beta2: f64,
+    /// Added to the square root of the second moment estimate in the denominator (1e-8).
     pub eps: f64,
     step: u64,
     /// Squared gradient values, for the norm.
@@ -35,6 +39,8 @@ pub struct Adam {
 }
 
 impl Adam {
+    /// An optimiser of every variable in `varmap`, with moments at zero and PyTorch's defaults
+    /// for the betas and ε.
     pub fn new(varmap: &VarMap, lr: f64) -> candle_core::Result<Self> {
         let mut vars: Vec<(String, Var)> = varmap
             .data()

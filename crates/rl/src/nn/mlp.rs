@@ -9,7 +9,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Activation {
+    /// Hyperbolic tangent (PPO's default).
     Tanh,
+    /// `max(0, x)` (SAC's and TD3's default).
     Relu,
 }
 
@@ -104,6 +106,8 @@ impl Mlp {
             .collect()
     }
 
+    /// `x` (`batch × input`) through every layer, the activation after each but the last:
+    /// `batch × output`.
     pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
         self.forward_with(x, false)
     }

@@ -30,12 +30,15 @@ const VF_OUTPUT_GAIN: f64 = 1.0;
 /// reading the same features. Parameters: `pi.*`, `vf.*`, `log_std` (and `features.*` for an
 /// extractor with parameters).
 pub struct ActorCritic {
+    /// Every parameter, by name.
     pub varmap: VarMap,
     features: Box<dyn FeaturesExtractor>,
     pi: Mlp,
     vf: Mlp,
     log_std: Var,
+    /// Observation width.
     pub obs_dim: usize,
+    /// Action width.
     pub act_dim: usize,
     /// Privileged values the value head reads after the observation (0: it reads the
     /// observation's features only).
@@ -53,7 +56,9 @@ pub struct ActorCritic {
 pub struct PolicyOutput {
     /// Sampled (or, deterministically, mean) actions, unclipped.
     pub actions: Vec<f32>,
+    /// Log-probability (nats) of each row's action, one per row.
     pub log_probs: Vec<f32>,
+    /// The value head's estimate of each row.
     pub values: Vec<f32>,
 }
 

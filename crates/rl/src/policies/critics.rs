@@ -14,7 +14,9 @@ const CRITIC_OUTPUT_GAIN: f64 = 1.0;
 /// Online twin critics named `critic.…`, their Polyak-averaged target copy named
 /// `critic_target.…`, and the pairs the update walks: what SAC and TD3 build alike.
 pub struct CriticsWithTarget {
+    /// The critics that learn.
     pub online: TwinCritics,
+    /// Their Polyak-averaged copy, for the bootstrap targets.
     pub target: TwinCritics,
     pub(crate) pairs: TargetPairs,
 }
@@ -63,6 +65,7 @@ impl CriticsWithTarget {
 /// Twin Q networks (Fujimoto et al. 2018: the minimum of two critics curbs the overestimation
 /// a single one accumulates). The two share one feature extractor.
 pub struct TwinCritics {
+    /// Both critics' parameters (and the extractor's), by name.
     pub varmap: VarMap,
     features: Box<dyn FeaturesExtractor>,
     qf1: Mlp,
@@ -100,6 +103,7 @@ impl TwinCritics {
         })
     }
 
+    /// Draws the extractor's and both critics' weights from `rng`.
     pub fn init_weights(&self, rng: &mut impl Rng) -> Result<()> {
         self.features.init_weights(&self.varmap, rng)?;
         self.qf1.init_weights(&self.varmap, rng)?;
@@ -160,6 +164,8 @@ impl TwinCritics {
 pub struct TargetPairs(pub(crate) Vec<(Var, Var)>);
 
 impl TargetPairs {
+    /// Pairs each variable of `online` with the one of `target` of the same name after its
+    /// prefix; errors when the target lacks one.
     pub fn new(
         online: &VarMap,
         online_prefix: &str,

@@ -22,6 +22,7 @@ const ACTOR_OUTPUT_GAIN: f64 = 0.01;
 
 /// The deterministic policy `a = tanh(MLP(features(s)))`.
 pub struct DeterministicActor {
+    /// Every parameter, by name.
     pub varmap: VarMap,
     features: Box<dyn FeaturesExtractor>,
     net: Mlp,
@@ -99,6 +100,7 @@ impl DeterministicActor {
         Ok(actions)
     }
 
+    /// Action width.
     pub fn act_dim(&self) -> usize {
         self.act_dim
     }
@@ -124,8 +126,11 @@ impl ActorNet for DeterministicActor {
 
 /// The actor, the critics and the targets of both.
 pub struct DeterministicPolicy {
+    /// The policy μ.
     pub actor: DeterministicActor,
+    /// Its Polyak-averaged copy μ', for the critics' targets.
     pub actor_target: DeterministicActor,
+    /// The twin critics and their target.
     pub critics: CriticsWithTarget,
     pub(crate) actor_pairs: TargetPairs,
 }

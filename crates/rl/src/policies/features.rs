@@ -13,6 +13,7 @@ pub trait FeaturesExtractor: Send + Sync {
     /// Values per feature vector.
     fn features_dim(&self) -> usize;
 
+    /// The features of `obs` (`batch × obs_dim`): `batch × features_dim`.
     fn forward(&self, obs: &Tensor) -> candle_core::Result<Tensor>;
 
     /// Draws initial weights from `rng` (so a seed fixes the network); `varmap` is the map the
@@ -59,6 +60,7 @@ pub struct FlattenExtractor {
 }
 
 impl FlattenExtractor {
+    /// The extractor for `obs_dim`-value observations.
     pub fn new(obs_dim: usize) -> Self {
         Self { dim: obs_dim }
     }

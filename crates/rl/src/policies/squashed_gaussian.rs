@@ -36,6 +36,7 @@ fn squash_log_std(raw: &Tensor) -> candle_core::Result<Tensor> {
 /// The squashed Gaussian policy: one MLP on the features gives each action dimension's mean and
 /// log std.
 pub struct SquashedGaussianActor {
+    /// Every parameter, by name.
     pub varmap: VarMap,
     features: Box<dyn FeaturesExtractor>,
     net: Mlp,
@@ -124,7 +125,9 @@ impl ActorNet for SquashedGaussianActor {
 
 /// The actor, the critics and the target critics.
 pub struct SquashedGaussianPolicy {
+    /// The policy.
     pub actor: SquashedGaussianActor,
+    /// The twin critics and their target.
     pub critics: CriticsWithTarget,
 }
 

@@ -29,23 +29,32 @@ fn mean(values: &[f32]) -> f32 {
 /// The loss terms of one minibatch (SB3's `train/*` scalars), before the step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct MinibatchStats {
+    /// Clipped surrogate loss.
     pub policy_loss: f32,
+    /// Mean squared error of the values against the returns.
     pub value_loss: f32,
+    /// The policy's entropy (nats), mean over the samples.
     pub entropy: f32,
+    /// Approximate KL divergence of the new policy from the old, `mean((r − 1) − log r)`.
     pub approx_kl: f32,
+    /// Fraction of samples whose ratio `r` lies outside 1 ± `clip_range`.
     pub clip_fraction: f32,
 }
 
 /// One minibatch's samples, row-major.
 pub struct Minibatch<'a> {
+    /// `batch × obs_dim`.
     pub observations: &'a [f32],
     /// What the value head reads: the observations, or with a privileged critic each
     /// observation followed by its privileged state.
     pub value_inputs: &'a [f32],
+    /// `batch × act_dim`, as sampled.
     pub actions: &'a [f32],
+    /// Log-probability (nats) of each action under the policy that collected it.
     pub old_log_probs: &'a [f32],
     /// Advantages as stored (normalised here when the configuration says so).
     pub advantages: &'a [f32],
+    /// The value head's targets, one per sample.
     pub returns: &'a [f32],
 }
 

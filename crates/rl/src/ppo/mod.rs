@@ -33,6 +33,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LrSchedule {
+    /// `learning_rate` throughout.
     Constant,
     /// Linearly from `learning_rate` to 0 at `total_timesteps`.
     Linear,
@@ -43,26 +44,40 @@ pub enum LrSchedule {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PpoConfig {
+    /// Adam's step size (SB3's `learning_rate`; the start value under [`LrSchedule::Linear`]);
+    /// positive.
     pub learning_rate: f64,
+    /// How `learning_rate` changes over training.
     pub lr_schedule: LrSchedule,
     /// Steps per environment per rollout.
     pub n_steps: usize,
     /// Minibatch size.
     pub batch_size: usize,
+    /// Passes over the rollout per update (SB3's `n_epochs`); at least 1.
     pub n_epochs: usize,
+    /// Discount factor, in [0, 1].
     pub gamma: f32,
+    /// GAE's λ (SB3's `gae_lambda`), trading the advantages' bias for variance; in [0, 1].
     pub gae_lambda: f32,
+    /// ε of the clipped objective (SB3's `clip_range`): the probability ratio is clipped to
+    /// 1 ± ε; in (0, 1).
     pub clip_range: f32,
     /// Clip the value update around the old values (None: no clipping, SB3's default).
     pub clip_range_vf: Option<f32>,
+    /// Normalise each minibatch's advantages to zero mean and unit standard deviation.
     pub normalize_advantage: bool,
+    /// Weight `c_e` of the entropy bonus (SB3's `ent_coef`); non-negative.
     pub ent_coef: f32,
+    /// Weight `c_v` of the value loss (SB3's `vf_coef`); non-negative.
     pub vf_coef: f32,
+    /// Bound on the global gradient norm of each step (SB3's `max_grad_norm`); ≤ 0: no clipping.
     pub max_grad_norm: f64,
-    /// Stop an update's epochs early when the approximate KL divergence exceeds this.
+    /// Stop an update's epochs early when a minibatch's approximate KL divergence, before its
+    /// step, exceeds 1.5 × this (SB3's `target_kl` rule).
     pub target_kl: Option<f32>,
     /// Hidden layers of the policy and of the value network.
     pub net_arch: Vec<usize>,
+    /// The activation after each hidden layer.
     pub activation: Activation,
     /// Initial log standard deviation of the Gaussian policy.
     pub log_std_init: f32,
@@ -239,26 +254,42 @@ pub(crate) fn load_actor(
 }
 
 /// Statistics of one PPO update (SB3's `train/*` scalars).
+/// The per-minibatch values are means over the minibatches stepped.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct UpdateStats {
+    /// Clipped surrogate loss (SB3's `train/policy_gradient_loss`).
     pub policy_loss: f32,
+    /// Mean squared error of the values against the returns.
     pub value_loss: f32,
+    /// The policy's entropy (nats); logged negated as `train/entropy_loss`.
     pub entropy: f32,
+    /// Approximate KL divergence of the new policy from the old, `mean((r − 1) − log r)`.
     pub approx_kl: f32,
+    /// Fraction of samples whose ratio `r` lies outside 1 ± `clip_range`.
     pub clip_fraction: f32,
+    /// [`explained_variance`] of the rollout's values against its returns, before the update.
     pub explained_variance: f32,
+    /// Global gradient norm before clipping.
     pub grad_norm: f32,
+    /// The learning rate of this update (after the schedule).
     pub learning_rate: f64,
+    /// Mean standard deviation of the Gaussian policy after the update (`exp(log_std)`).
     pub std: f32,
+    /// Epochs completed; fewer than `n_epochs` when `target_kl` stopped the update.
     pub epochs_run: usize,
 }
 
 /// The PPO learner: policy, optimiser, rollout buffer and random stream.
 pub struct Ppo {
+    /// The hyperparameters.
     pub config: PpoConfig,
+    /// The policy and value networks.
     pub policy: ActorCritic,
+    /// Adam over all of the policy's variables.
     pub optimizer: Adam,
+    /// The current iteration's rollout.
     pub buffer: RolloutBuffer,
+    /// Random stream for action sampling and minibatch shuffling.
     pub rng: ChaCha8Rng,
     /// Environment steps taken so far (all environments together).
     pub num_timesteps: u64,
@@ -427,6 +458,8 @@ impl MinibatchData {
 }
 
 impl Ppo {
+    /// A learner for `n_envs` environments (`obs_dim` observation values, `act_dim` action
+    /// values), its networks initialised from `seed`; fails on an invalid configuration.
     pub fn new(
         config: PpoConfig,
         obs_dim: usize,

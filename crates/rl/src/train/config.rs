@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 pub struct EvalConfig {
     /// Evaluate every this many environment steps (0: never).
     pub freq: u64,
+    /// Episodes per evaluation (seeds from [`EVAL_SEED_BASE`]); at least 1 when `freq` > 0.
     pub episodes: u32,
     /// Stop training once the evaluation success rate reaches this (and, with
     /// `confirm_episodes`, the confirmation holds).
@@ -70,7 +71,9 @@ pub struct TrainConfig {
     /// The algorithm and its settings (`algo = "sac"` and the `[sac]` table).
     #[serde(flatten)]
     pub algo: AlgoConfig,
+    /// Environment steps to train for (all environments together); at least 1.
     pub total_timesteps: u64,
+    /// Seeds the learner (networks, random stream) and the training environments.
     pub seed: u64,
     /// Parallel environments.
     pub n_envs: usize,
@@ -80,7 +83,9 @@ pub struct TrainConfig {
     pub checkpoint_freq: u64,
     /// Stop after this much wall time (s), across resumes (a time budget for benchmarks).
     pub max_seconds: Option<f64>,
+    /// Observation and reward normalisation (SB3's `VecNormalize`).
     pub normalize: VecNormalizeConfig,
+    /// Evaluation during training (`[eval]`).
     pub eval: EvalConfig,
     /// The environment's own settings (its TOML table; missing keys take their defaults).
     pub env: toml::Table,
@@ -124,6 +129,7 @@ impl TrainConfig {
         Ok(config)
     }
 
+    /// Checks every setting, the environment's included; errors name the key.
     pub fn validate(&self) -> Result<()> {
         let bad = |key: &str, problem: &str| {
             Err(RlError::Config {

@@ -50,25 +50,34 @@ pub fn wilson_lower_bound(successes: u32, n: u32) -> f64 {
 /// Progress reported to the caller (for a progress bar).
 #[derive(Clone, Debug, Default)]
 pub struct Progress {
+    /// Environment steps taken so far (all environments together).
     pub num_timesteps: u64,
+    /// Environment steps the run trains for.
     pub total_timesteps: u64,
     /// Environment steps per second of wall time, updates included.
     pub fps: f64,
+    /// Mean return of the last 100 training episodes (SB3's `rollout/ep_rew_mean`);
+    /// `None` before one has ended.
     pub ep_rew_mean: Option<f32>,
+    /// Share of the last 100 training episodes that succeeded.
     pub rollout_success_rate: Option<f32>,
     /// For each of the task's extras, the mean over recent episodes of its largest value in
     /// the episode (`grasped`: the share of episodes with a grasp; `lift`: the mean peak lift).
     pub rollout_max_extras: NamedValues,
+    /// The latest evaluation's result.
     pub last_eval: Option<EvalResult>,
     /// Evaluations run so far (in this session).
     pub eval_count: usize,
+    /// Success rate of the best evaluation so far.
     pub best_success_rate: Option<f32>,
 }
 
 /// Summary of a finished run (also written to `summary.json` in the run directory).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct TrainSummary {
+    /// The algorithm's name (`"ppo"`, `"sac"`, `"td3"`).
     pub algo: String,
+    /// Environment steps trained, at the end.
     pub num_timesteps: u64,
     /// Wall time of the whole run, across resumes.
     pub seconds: f64,
@@ -76,7 +85,9 @@ pub struct TrainSummary {
     pub fps: f64,
     /// Peak resident memory of the process (MiB), where the system reports it.
     pub peak_memory_mib: Option<f64>,
+    /// The best evaluation (by confirmed, success rate, return).
     pub best: Option<EvalResult>,
+    /// The run directory.
     pub run_dir: PathBuf,
     /// The step the run resumed from, if it did.
     pub resumed_from: Option<u64>,
