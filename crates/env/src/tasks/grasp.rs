@@ -10,11 +10,11 @@
 //! [`Task::success_judge`]) run that same type, and the scripted pick judges by
 //! [`GraspSettings::success_rule`].
 
+use crate::arm::observation::rich_observation;
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings,
     SuccessJudge, Task, TaskFlags, TaskSettings,
 };
-use crate::arm::observation::rich_observation;
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
@@ -455,8 +455,7 @@ impl Task for Grasp {
                 terms.set("success", if e.success { r.success } else { 0.0 });
                 if r.align > 0.0 {
                     let quarter = std::f64::consts::FRAC_PI_4;
-                    let yaw =
-                        (state.relative_yaw(0) + quarter).rem_euclid(2.0 * quarter) - quarter;
+                    let yaw = (state.relative_yaw(0) + quarter).rem_euclid(2.0 * quarter) - quarter;
                     let near = 1.0 - (4.0 * distance).tanh();
                     terms.set("align", -r.align * (yaw.abs() / quarter) as f32 * near);
                 }

@@ -3,6 +3,7 @@
 //! the object's centre is within `goal_tolerance` of the goal and slower than
 //! `max_object_speed`, for `success_hold_steps` consecutive control steps.
 
+use crate::arm::observation::rich_observation;
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
     TaskFlags, TaskSettings,
@@ -10,7 +11,6 @@ use crate::arm::{
 use crate::config::{check_at_least_one, check_non_negative, check_positive};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
-use crate::arm::observation::rich_observation;
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::Scene;
 use rand::Rng;

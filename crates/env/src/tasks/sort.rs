@@ -6,6 +6,7 @@
 //! *active* object is the first one not yet resting in its bin, and the observation and the
 //! staged reward centre on it. Success: every object rests in its bin.
 
+use crate::arm::observation::rich_observation;
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
     TaskFlags, TaskSettings,
@@ -13,7 +14,6 @@ use crate::arm::{
 use crate::config::{check_at_least_one, check_non_negative};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
-use crate::arm::observation::rich_observation;
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::{BinConfig, ObjectConfig, ObjectShape, Scene, SceneConfig};
 use rand::Rng;
