@@ -3,7 +3,7 @@
 //! The criterion benchmarks in `crates/sim/benches` measure the same loops with statistics; this
 //! command is the quick, scriptable version (`--json` for machines).
 
-use crate::SceneArgs;
+use crate::scene_args::SceneArgs;
 use anyhow::Result;
 use fairgrasp_env::{Env, GraspConfig, GraspEnv, VecEnv, VectorEnv};
 use fairgrasp_sim::pick::{PickScript, grasp_and_lift};

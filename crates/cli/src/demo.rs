@@ -1,6 +1,6 @@
 //! `fairgrasp demo …`: scripted demonstrations in simulation.
 
-use crate::SceneArgs;
+use crate::scene_args::SceneArgs;
 use anyhow::Result;
 use fairgrasp_env::tasks::grasp::GraspSettings;
 use fairgrasp_sim::pick::{PickScript, evaluate_scripted_pick};

@@ -235,6 +235,18 @@ pub fn record_episode(
         .map_err(|e| RlError::Other(format!("eval.record: {e}")))
 }
 
+/// The lower end of the 95 % Wilson score interval for `successes` of `n` (0 when `n` is 0).
+pub fn wilson_lower_bound(successes: u32, n: u32) -> f64 {
+    if n == 0 {
+        return 0.0;
+    }
+    let (n, z) = (n as f64, 1.959_963_985);
+    let p = successes as f64 / n;
+    let centre = p + z * z / (2.0 * n);
+    let margin = z * ((p * (1.0 - p) + z * z / (4.0 * n)) / n).sqrt();
+    (centre - margin) / (1.0 + z * z / n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,6 +10,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::Duration;
 
+/// The name a fairgrasp twin answers `TwinInfo` with (how [`TwinHost::detect`] tells it from a
+/// real controller).
+pub const TWIN_NAME: &str = "fairgrasp-twin";
+
 /// The digital twin: `TwinReset(seed)` places a new object before each episode and
 /// `TwinEpisodeResult()` judges it by the task's rule.
 pub struct TwinHost {
@@ -23,9 +27,7 @@ impl TwinHost {
     pub fn detect(addr: &str, seed: u64) -> Result<Option<Self>> {
         let rpc = XmlRpcClient::new(addr, Duration::from_secs(2));
         match rpc.call("TwinInfo", &[]) {
-            Ok(Value::Array(items))
-                if items.get(1).and_then(Value::as_str) == Some(crate::twin::TWIN_NAME) =>
-            {
+            Ok(Value::Array(items)) if items.get(1).and_then(Value::as_str) == Some(TWIN_NAME) => {
                 Ok(Some(Self { rpc, seed }))
             }
             Ok(_) => Ok(None),

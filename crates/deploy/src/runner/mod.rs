@@ -23,7 +23,7 @@ mod model_io;
 pub use clock::{MAX_CMD_T, ServoClock};
 pub use estimate::ArmReader;
 pub use guard::{GuardedLink, describe};
-pub use hosts::{OperatorHost, TwinHost};
+pub use hosts::{OperatorHost, TWIN_NAME, TwinHost};
 pub use log::JsonLog;
 pub use model_io::ModelIo;
 

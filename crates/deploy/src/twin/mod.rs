@@ -72,8 +72,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 pub use world::EpisodeResult;
 
-/// The name `TwinInfo` answers with.
-pub const TWIN_NAME: &str = "fairgrasp-twin";
+pub use crate::runner::TWIN_NAME;
 
 /// How a twin is set up.
 #[derive(Clone, Debug)]

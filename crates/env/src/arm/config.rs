@@ -1,42 +1,11 @@
 //! The configuration every arm task shares — scene, control, randomisation, object shapes —
 //! around the task's own `[task]` and `[reward]` sections.
 
-use crate::arm::Task;
-use crate::arm::control::ControlConfig;
-use crate::arm::readings::ReadingsConfig;
 pub use crate::arm::shapes::{ShapeKind, ShapesConfig};
 use crate::config::{check_non_negative, check_range};
-use crate::core::RenderMode;
 use crate::error::{EnvError, Result};
-use fairgrasp_render::{Camera, CameraConfig};
-use fairgrasp_sim::scene::SceneConfig;
-use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::fmt::Debug;
-
-/// What the shared arm environment needs from a task's `[task]` section.
-pub trait TaskSettings:
-    Clone + Debug + Default + PartialEq + Serialize + DeserializeOwned + Send + 'static
-{
-    /// The task these settings configure: lets code holding a typed configuration build its
-    /// env without naming the task ([`crate::arm::erased::nominal_env`]).
-    type Task: Task<Settings = Self>;
-
-    /// Control steps before the episode is truncated.
-    fn max_episode_steps(&self) -> u32;
-    /// How [`crate::Env::render`] renders; `None`: it returns nothing.
-    fn render_mode(&self) -> Option<RenderMode>;
-    /// Checks ranges; errors name the key (`task.…`).
-    fn validate(&self) -> Result<()>;
-}
-
-/// What the shared arm environment needs from a task's `[reward]` section.
-pub trait RewardSettings:
-    Clone + Debug + Default + PartialEq + Serialize + DeserializeOwned + Send + 'static
-{
-    /// Checks ranges; errors name the key (`reward.…`).
-    fn validate(&self) -> Result<()>;
-}
 
 /// Standard deviations of the Gaussian noise added to each observation group, every step.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -206,71 +175,5 @@ impl RandomizationConfig {
             check_non_negative(&format!("randomization.observation_noise.{key}"), v)?;
         }
         Ok(())
-    }
-}
-
-/// Everything that defines an arm environment: the shared sections and the task's `T` (`[task]`)
-/// and `R` (`[reward]`).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(
-    deny_unknown_fields,
-    default,
-    bound = "T: TaskSettings, R: RewardSettings"
-)]
-pub struct ArmEnvConfig<T, R> {
-    /// The `[scene]` section: physics, table, objects, bins, arm and gripper.
-    pub scene: SceneConfig,
-    /// The `[control]` section: action mapping, limits and the controller model.
-    pub control: ControlConfig,
-    /// The task's `[task]` section.
-    pub task: T,
-    /// The task's `[reward]` section.
-    pub reward: R,
-    /// The `[randomization]` section: domain randomisation.
-    pub randomization: RandomizationConfig,
-    /// The `[shapes]` section: random object shapes.
-    pub shapes: ShapesConfig,
-    /// The camera of the `rgb_array` and `depth_array` render modes (unused otherwise).
-    pub render: CameraConfig,
-    /// The policy's observation from synthesized controller readings, as on the arm.
-    pub readings: ReadingsConfig,
-}
-
-impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
-    /// Checks every range; the error names the key.
-    pub fn validate(&self) -> Result<()> {
-        self.scene.validate().map_err(|e| match e {
-            fairgrasp_sim::SimError::Config { key, problem } => {
-                EnvError::config(format!("scene.{key}"), problem)
-            }
-            other => EnvError::Sim(other),
-        })?;
-        self.control.validate()?;
-        self.task.validate()?;
-        self.reward.validate()?;
-        self.randomization.validate()?;
-        self.shapes.validate()?;
-        self.readings.validate()?;
-        if !self.readings.enabled && self.control.speed_scales.iter().any(|&s| s != 1.0) {
-            return Err(EnvError::config(
-                "control.speed_scales",
-                "scales below 1 need readings.enabled = true (the observation reads speeds in \
-                 the policy's time only through the controller's readings)",
-            ));
-        }
-        Camera::new(self.render.clone())?;
-        Ok(())
-    }
-
-    /// Parses TOML text, applies `overrides` (`dotted.key=value`), then validates.
-    pub fn from_toml_str(text: &str, overrides: &[String]) -> Result<Self> {
-        let config: Self = crate::config::parse_toml(text, overrides)?;
-        config.validate()?;
-        Ok(config)
-    }
-
-    /// The configuration as TOML text (e.g. to save it beside a run).
-    pub fn to_toml_string(&self) -> String {
-        toml::to_string(self).unwrap_or_else(|e| format!("# could not serialise: {e}\n"))
     }
 }

@@ -7,21 +7,12 @@
 //!   observation, the action mapping, the nominal state and the task's success rule;
 //! - [`SuccessJudge`]: a task's success rule applied to the states of one episode.
 
-use super::TaskSettings;
-use super::{ActionMapper, ArmEnv, ArmEnvConfig, ArmState, Evaluation, ReadingsConfig, Task};
+use crate::arm::task::{ArmEnvConfig, Evaluation, SuccessJudge, Task, TaskSettings};
+use crate::arm::{ActionMapper, ArmEnv, ArmState, ReadingsConfig};
 use crate::config::from_table;
 use crate::core::Env;
 use crate::error::Result;
 use fairgrasp_sim::scene::Scene;
-
-/// A task's success rule over the states of one episode, for code that builds its states itself
-/// (the deployment loop judges its estimated states): the rule the task's
-/// [`Task::evaluate`] applies in training. Fresh for each episode ([`Task::success_judge`]).
-pub trait SuccessJudge: Send {
-    /// Feeds one control step's state; true while the rule is met (its conditions have held for
-    /// the hold steps it needs).
-    fn update(&mut self, state: &ArmState) -> bool;
-}
 
 /// An arm task's scene staged outside training, in its nominal world: no domain randomisation
 /// (the real world does not change between episodes), the configured object mass and friction,

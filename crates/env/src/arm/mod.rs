@@ -10,7 +10,8 @@
 //! - [`readings`]: [`StateEstimator`], controller readings → the policy's state (the
 //!   deployment's observation);
 //! - [`observation`]: [`ObsWriter`] and noise groups;
-//! - [`config`]: [`ArmEnvConfig`], the shared configuration sections.
+//! - [`task`]: [`Task`], what a task is to this base, and [`ArmEnvConfig`], its configuration;
+//! - [`config`]: the shared configuration sections (randomisation, observation noise).
 
 pub mod config;
 pub mod control;
@@ -22,19 +23,20 @@ pub mod readings;
 pub mod servo;
 pub mod shapes;
 pub mod state;
+pub mod task;
 
-pub use config::{
-    ArmEnvConfig, ObservationNoise, RandomizationConfig, RewardSettings, ShapeKind, ShapesConfig,
-    TaskSettings,
-};
+pub use config::{ObservationNoise, RandomizationConfig, ShapeKind, ShapesConfig};
 pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
 pub use drives::{ArmDrives, DrivesConfig};
-pub use erased::{ArmTaskEnv, ArmWorld, SuccessJudge};
+pub use erased::{ArmTaskEnv, ArmWorld};
 pub use gripper::{GripperConfig, GripperDrive};
 pub use observation::{NoiseGroup, ObsWriter};
 pub use readings::{ControllerReading, EstimatorFacts, ReadingsConfig, StateEstimator};
 pub use servo::{JointRamp, ServoConfig};
 pub use state::{ArmState, ObjectReading};
+pub use task::{
+    ArmEnvConfig, Evaluation, RewardSettings, SuccessJudge, Task, TaskFlags, TaskSettings,
+};
 
 use crate::core::{Env, EpisodeEvent, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::{EnvError, Result};
@@ -44,116 +46,11 @@ use fairgrasp_render::Renderer;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::kinematics::SerialChain;
 use fairgrasp_sim::rapier3d::na::Isometry3;
-use fairgrasp_sim::scene::{CollisionSensor, PhysicalParams, Scene, SceneConfig};
+use fairgrasp_sim::scene::{CollisionSensor, PhysicalParams, Scene};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::VecDeque;
 use std::ops::Range;
-
-/// What a task's evaluation of one step found (ManiSkill's `evaluate()`): its flags typed while
-/// the task reads them, named only in [`Info::extras`].
-///
-/// A task's reward reads its flags as fields, so a flag it never declared does not compile
-/// (reading them back by name, a typo read 0 and silently zeroed a reward term). This reads
-/// one the grasp declares:
-///
-/// ```
-/// use fairgrasp_env::arm::Evaluation;
-/// use fairgrasp_env::tasks::GraspFlags;
-/// fn grasped(e: &Evaluation<GraspFlags>) -> bool {
-///     e.flags.grasped
-/// }
-/// ```
-///
-/// and this one it does not:
-///
-/// ```compile_fail
-/// use fairgrasp_env::arm::Evaluation;
-/// use fairgrasp_env::tasks::GraspFlags;
-/// fn placed(e: &Evaluation<GraspFlags>) -> bool {
-///     e.flags.placed // the grasp declares no `placed`
-/// }
-/// ```
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Evaluation<F = NamedValues> {
-    /// The success rule holds: the episode terminates.
-    pub success: bool,
-    /// The task failed for good (e.g. an object fell off the table): the episode terminates.
-    pub failure: Option<EpisodeEvent>,
-    /// The task's flags and measures.
-    pub flags: F,
-}
-
-/// A task's flags and measures for one step: a struct of named fields, reported by name.
-pub trait TaskFlags: Clone + std::fmt::Debug + Send + 'static {
-    /// The flags by name, in a fixed order, as [`Info::extras`] reports them.
-    fn named(&self) -> NamedValues;
-}
-
-impl<F: TaskFlags> Evaluation<F> {
-    /// The evaluation with its flags named, as the env's callers read it.
-    pub fn named(&self) -> Evaluation {
-        Evaluation {
-            success: self.success,
-            failure: self.failure,
-            flags: self.flags.named(),
-        }
-    }
-}
-
-/// A task on the shared arm environment. One small type per task (see [`crate::tasks`]).
-pub trait Task: Send + Sized + 'static {
-    /// The `[task]` section.
-    type Settings: TaskSettings;
-    /// The `[reward]` section.
-    type Reward: RewardSettings;
-    /// The step's flags and measures ([`Evaluation::flags`]).
-    type Flags: TaskFlags;
-    /// The registered id (`FaArmGrasp-v0`).
-    const ID: &'static str;
-
-    /// Adjusts the scene before it is built (objects, bins).
-    fn configure_scene(
-        _config: &ArmEnvConfig<Self::Settings, Self::Reward>,
-        _scene: &mut SceneConfig,
-    ) -> Result<()> {
-        Ok(())
-    }
-
-    /// The task for a built scene; checks that the scene suits it.
-    fn new(config: &ArmEnvConfig<Self::Settings, Self::Reward>, scene: &Scene) -> Result<Self>;
-
-    /// Starts an episode: the arm is at home with this episode's physical parameters and object
-    /// shapes; place the objects, draw goals, settle the scene.
-    fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()>;
-
-    /// Writes the observation. `previous_action` is normalised to [-1, 1].
-    fn observe(&self, state: &ArmState, previous_action: &[f32], out: &mut ObsWriter);
-
-    /// Evaluates the step just taken.
-    fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation<Self::Flags>;
-
-    /// The success rule `evaluate` applies, as a judge of states alone for a new episode (the
-    /// deployment loop judges its estimated states by it); `None` when success needs the
-    /// simulator (sorting's bins).
-    fn success_judge(&self) -> Option<Box<dyn SuccessJudge>> {
-        None
-    }
-
-    /// The reward of the step just taken, by term. `steps_left` counts the control steps left
-    /// before the time limit.
-    fn reward(
-        &mut self,
-        evaluation: &Evaluation<Self::Flags>,
-        state: &ArmState,
-        steps_left: u32,
-    ) -> NamedValues;
-
-    /// A line describing the task's state, for the `ansi` render mode.
-    fn describe(&self, _state: &ArmState) -> String {
-        String::new()
-    }
-}
 
 /// State that lives for one episode.
 #[derive(Clone, Debug)]

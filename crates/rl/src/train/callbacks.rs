@@ -9,12 +9,12 @@
 use crate::Policy;
 use crate::algorithm::TensorMap;
 use crate::error::{Result, RlError};
-use crate::evaluation::{Actor, EvalResult, evaluate_parallel, record_episode};
+use crate::evaluation::{Actor, EvalResult, evaluate_parallel, record_episode, wilson_lower_bound};
 use crate::logger::{CsvLogger, TensorBoardWriter};
 use crate::model::{ModelMeta, save_model};
 use crate::train::config::{EVAL_SEED_BASE, TrainConfig, VALIDATION_SEED_BASE};
 use crate::train::run_dir::{RunDir, TrainerState};
-use crate::train::{Progress, wilson_lower_bound};
+use fairgrasp_env::NamedValues;
 use fairgrasp_env::VecStep;
 use fairgrasp_env::atomic;
 use fairgrasp_env::wrappers::EpisodeStats;
@@ -31,6 +31,31 @@ pub enum StopReason {
     TimeBudget,
     /// A caller's callback asked to stop (Ctrl-C in Python, a Ray Tune scheduler, …).
     Requested,
+}
+
+/// Progress reported to the caller (for a progress bar).
+#[derive(Clone, Debug, Default)]
+pub struct Progress {
+    /// Environment steps taken so far (all environments together).
+    pub num_timesteps: u64,
+    /// Environment steps the run trains for.
+    pub total_timesteps: u64,
+    /// Environment steps per second of wall time, updates included.
+    pub fps: f64,
+    /// Mean return of the last 100 training episodes (SB3's `rollout/ep_rew_mean`);
+    /// `None` before one has ended.
+    pub ep_rew_mean: Option<f32>,
+    /// Share of the last 100 training episodes that succeeded.
+    pub rollout_success_rate: Option<f32>,
+    /// For each of the task's extras, the mean over recent episodes of its largest value in
+    /// the episode (`grasped`: the share of episodes with a grasp; `lift`: the mean peak lift).
+    pub rollout_max_extras: NamedValues,
+    /// The latest evaluation's result.
+    pub last_eval: Option<EvalResult>,
+    /// Evaluations run so far (in this session).
+    pub eval_count: usize,
+    /// Success rate of the best evaluation so far.
+    pub best_success_rate: Option<f32>,
 }
 
 /// Something that runs between the learner's iterations.

@@ -14,10 +14,12 @@ pub mod run_dir;
 use crate::algo::{LearnerShape, LearnerVisitor};
 use crate::algorithm::{Algorithm, TensorMap};
 use crate::error::{Result, RlError};
-pub use crate::evaluation::{Actor, EvalResult, evaluate, evaluate_parallel, record_episode};
+pub use crate::evaluation::{
+    Actor, EvalResult, evaluate, evaluate_parallel, record_episode, wilson_lower_bound,
+};
 use crate::logger::{CsvLogger, TensorBoardWriter};
 use crate::model::{ModelMeta, save_model};
-pub use callbacks::{Callback, CallbackContext, RunState, StopReason};
+pub use callbacks::{Callback, CallbackContext, Progress, RunState, StopReason};
 use callbacks::{
     Evaluate, LearnerSnapshot, LogScalars, Logs, OnProgress, SaveCheckpoint, StopOnSuccess,
     TimeBudget,
@@ -34,43 +36,6 @@ use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// The lower end of the 95 % Wilson score interval for `successes` of `n` (0 when `n` is 0).
-pub fn wilson_lower_bound(successes: u32, n: u32) -> f64 {
-    if n == 0 {
-        return 0.0;
-    }
-    let (n, z) = (n as f64, 1.959_963_985);
-    let p = successes as f64 / n;
-    let centre = p + z * z / (2.0 * n);
-    let margin = z * ((p * (1.0 - p) + z * z / (4.0 * n)) / n).sqrt();
-    (centre - margin) / (1.0 + z * z / n)
-}
-
-/// Progress reported to the caller (for a progress bar).
-#[derive(Clone, Debug, Default)]
-pub struct Progress {
-    /// Environment steps taken so far (all environments together).
-    pub num_timesteps: u64,
-    /// Environment steps the run trains for.
-    pub total_timesteps: u64,
-    /// Environment steps per second of wall time, updates included.
-    pub fps: f64,
-    /// Mean return of the last 100 training episodes (SB3's `rollout/ep_rew_mean`);
-    /// `None` before one has ended.
-    pub ep_rew_mean: Option<f32>,
-    /// Share of the last 100 training episodes that succeeded.
-    pub rollout_success_rate: Option<f32>,
-    /// For each of the task's extras, the mean over recent episodes of its largest value in
-    /// the episode (`grasped`: the share of episodes with a grasp; `lift`: the mean peak lift).
-    pub rollout_max_extras: NamedValues,
-    /// The latest evaluation's result.
-    pub last_eval: Option<EvalResult>,
-    /// Evaluations run so far (in this session).
-    pub eval_count: usize,
-    /// Success rate of the best evaluation so far.
-    pub best_success_rate: Option<f32>,
-}
 
 /// Summary of a finished run (also written to `summary.json` in the run directory).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
