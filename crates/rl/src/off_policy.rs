@@ -89,8 +89,7 @@ impl<T: OffPolicy> Algorithm for T {
     }
 
     fn log_interval(&self) -> u64 {
-        // One iteration per vector step: a log line per 1,000 steps is SB3's `log_interval`
-        // scale for off-policy learners.
+        // One iteration per vector step: logging every iteration would write a row per step.
         1000
     }
 
