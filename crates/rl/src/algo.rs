@@ -65,6 +65,19 @@ impl std::str::FromStr for Algo {
     }
 }
 
+/// The files of `configs/` a run starts from, by name: `<algo>_<env>` (see
+/// [`crate::configs::short_env_name`]), compiled in. Every algorithm has a `<algo>_grasp`.
+pub const BUILTIN_CONFIGS: [(&str, &str); 5] = [
+    ("ppo_grasp", include_str!("../../../configs/ppo_grasp.toml")),
+    ("sac_grasp", include_str!("../../../configs/sac_grasp.toml")),
+    ("td3_grasp", include_str!("../../../configs/td3_grasp.toml")),
+    (
+        "ppo_pick_place",
+        include_str!("../../../configs/ppo_pick_place.toml"),
+    ),
+    ("ppo_sort", include_str!("../../../configs/ppo_sort.toml")),
+];
+
 /// An algorithm with its settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(from = "AlgoTables", into = "AlgoTables")]

@@ -1,21 +1,9 @@
-//! The built-in training configurations: the files in `configs/`, compiled in so that `fairgrasp
-//! train` and Python's `fairgrasp.train()` start from the same tuned settings in any directory.
+//! Which built-in training configuration a run starts from (the files in `configs/`, compiled
+//! in as [`crate::algo::BUILTIN_CONFIGS`]), so that `fairgrasp train` and Python's
+//! `fairgrasp.train()` start from the same tuned settings in any directory.
 
-use crate::algo::Algo;
+use crate::algo::{Algo, BUILTIN_CONFIGS};
 use crate::error::{Result, RlError};
-
-/// The files of `configs/` a run starts from, by name: `<algo>_<env>` (see [`short_env_name`]).
-/// Every algorithm has a `<algo>_grasp`.
-pub const BUILTIN_CONFIGS: [(&str, &str); 5] = [
-    ("ppo_grasp", include_str!("../../../configs/ppo_grasp.toml")),
-    ("sac_grasp", include_str!("../../../configs/sac_grasp.toml")),
-    ("td3_grasp", include_str!("../../../configs/td3_grasp.toml")),
-    (
-        "ppo_pick_place",
-        include_str!("../../../configs/ppo_pick_place.toml"),
-    ),
-    ("ppo_sort", include_str!("../../../configs/ppo_sort.toml")),
-];
 
 /// The built-in configuration text for an env and algorithm, and whether it was tuned for that
 /// env (else it is the algorithm's grasp file, whose `[env]` table is the grasp task's).
