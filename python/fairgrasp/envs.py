@@ -20,6 +20,21 @@ def box(bounds: tuple[np.ndarray, np.ndarray]) -> spaces.Box:
     return spaces.Box(low=low, high=high, dtype=np.float32)
 
 
+def observation_space(native: Any) -> spaces.Space:
+    """One env's observation space: the state box, or with camera images a ``Dict`` of it
+    (``state``) and a ``(H, W, C)`` uint8 box per camera (``scene_rgb``, ``wrist_depth``, …),
+    as SB3's ``MultiInputPolicy`` reads it."""
+    state = box(native.observation_bounds())
+    views = native.image_views()
+    if not views:
+        return state
+    images = {
+        name: spaces.Box(low=0, high=255, shape=(h, w, c), dtype=np.uint8)
+        for name, h, w, c in views
+    }
+    return spaces.Dict({"state": state, **images})
+
+
 class FairgraspEnv(gym.Env):
     """A fairgrasp env (Rust) behind Gymnasium's ``Env`` API.
 
@@ -28,10 +43,15 @@ class FairgraspEnv(gym.Env):
         ``"ansi"`` (arm tasks), from the ``[render]`` camera.
     :param rescale_action: actions in [-1, 1], mapped onto the env's own bounds (default, as
         the native trainer learns); ``False`` for the env's own units.
+    :param obs_mode: ``"state"`` (default: the task's observation vector), ``"rgb+state"``,
+        ``"depth+state"`` or ``"rgbd+state"`` (arm tasks; ManiSkill's names): a dict of the
+        arm's own readings (``state``, never the object's pose) and uint8 camera images
+        (``[camera]`` settings: size, scene and wrist cameras).
     :param config: the env's settings by their TOML keys: sections as dicts
         (``control={"action_mode": "cartesian"}``) or dotted keys.
 
-    Observations are float32 vectors inside the observation space's (finite) bounds. A
+    Observations are float32 vectors inside the observation space's (finite) bounds, or dicts
+    of one and ``H×W×C`` uint8 images in a pixel ``obs_mode``. A
     wrong-shaped, NaN or infinite action raises :class:`fairgrasp.ActionError`; an unknown or
     out-of-range setting raises :class:`fairgrasp.ConfigError`. Without a seed, the first
     ``reset`` draws one from ``np_random`` (fresh entropy, as Gymnasium's envs do).
@@ -44,12 +64,13 @@ class FairgraspEnv(gym.Env):
         env_id: str = "FaArmGrasp-v0",
         render_mode: str | None = None,
         rescale_action: bool = True,
+        obs_mode: str | None = None,
         **config: Any,
     ) -> None:
-        self._env = _native.Env(env_id, config or None, rescale_action, render_mode)
+        self._env = _native.Env(env_id, config or None, rescale_action, render_mode, obs_mode)
         self.env_id = env_id
         self.config = config
-        self.observation_space = box(self._env.observation_bounds())
+        self.observation_space = observation_space(self._env)
         self.action_space = box(self._env.action_bounds())
         self.metadata = self._env.metadata()
         self.render_mode = render_mode
@@ -57,14 +78,14 @@ class FairgraspEnv(gym.Env):
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
+    ) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
         if seed is None and not self._seeded:
             seed = int(self.np_random.integers(0, 2**63 - 1))
         self._seeded = True
         return self._env.reset(seed)
 
-    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         return self._env.step(action)
 
     def render(self) -> np.ndarray | str | None:

@@ -10,7 +10,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from fairgrasp import _native
-from fairgrasp.envs import box
+from fairgrasp.envs import box, observation_space
 
 
 class FairgraspVecEnv(VecEnv):
@@ -43,18 +43,19 @@ class FairgraspVecEnv(VecEnv):
         seed: int | None = None,
         render_mode: str | None = None,
         rescale_action: bool = True,
+        obs_mode: str | None = None,
         **config: Any,
     ) -> None:
-        self._envs = _native.VecEnv(env_id, n_envs, config or None, threads, rescale_action, render_mode)
+        self._envs = _native.VecEnv(
+            env_id, n_envs, config or None, threads, rescale_action, render_mode, obs_mode
+        )
         self.env_id = env_id
         self.config = config
         self._render_mode = render_mode
         self._python_attrs: list[dict[str, Any]] = [{} for _ in range(n_envs)]
         self._actions: np.ndarray | None = None
         self._started = False
-        super().__init__(
-            n_envs, box(self._envs.observation_bounds()), box(self._envs.action_bounds())
-        )
+        super().__init__(n_envs, observation_space(self._envs), box(self._envs.action_bounds()))
         if seed is not None:
             self.seed(seed)
 
@@ -63,7 +64,7 @@ class FairgraspVecEnv(VecEnv):
         """Rust threads stepping the envs."""
         return self._envs.threads
 
-    def reset(self) -> np.ndarray:
+    def reset(self) -> Any:
         seeds = self._seeds
         if all(s is None for s in seeds):
             if self._started:
@@ -85,7 +86,7 @@ class FairgraspVecEnv(VecEnv):
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 
-    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         if self._actions is None:
             raise RuntimeError("step_wait() without step_async()")
         actions = np.asarray(self._actions, dtype=np.float32).reshape(self.num_envs, -1)

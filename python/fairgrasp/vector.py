@@ -10,7 +10,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from fairgrasp import _native
-from fairgrasp.envs import box
+from fairgrasp.envs import box, observation_space
 
 
 class FairgraspVectorEnv(gym.vector.VectorEnv):
@@ -34,14 +34,15 @@ class FairgraspVectorEnv(gym.vector.VectorEnv):
         threads: int = 0,
         render_mode: str | None = None,
         rescale_action: bool = True,
+        obs_mode: str | None = None,
         **config: Any,
     ) -> None:
         self._envs = _native.VecEnv(
-            env_id, num_envs, config or None, threads, rescale_action, render_mode
+            env_id, num_envs, config or None, threads, rescale_action, render_mode, obs_mode
         )
         self.env_id = env_id
         self.num_envs = num_envs
-        self.single_observation_space = box(self._envs.observation_bounds())
+        self.single_observation_space = observation_space(self._envs)
         self.single_action_space = box(self._envs.action_bounds())
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)

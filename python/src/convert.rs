@@ -3,6 +3,7 @@
 
 use crate::errors::{ActionError, ConfigError};
 use fairgrasp_env::core::Frame;
+use fairgrasp_env::spaces::ImageSpace;
 use fairgrasp_env::{EpisodeEvent, Info};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -158,15 +159,76 @@ pub fn bounds<'py>(py: Python<'py>, space: &fairgrasp_env::spaces::BoxSpace) -> 
     )
 }
 
+/// An observation as Gymnasium sees it: the float32 state vector, or with camera images a dict
+/// of it (`state`) and one `H×W×C` uint8 array per view (`scene_rgb`, …), `images` holding
+/// the views one after another.
+pub fn observation<'py>(
+    py: Python<'py>,
+    obs: Vec<f32>,
+    images: Option<(&ImageSpace, &[u8])>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let state = PyArray1::from_vec(py, obs).into_any();
+    let Some((space, bytes)) = images else {
+        return Ok(state);
+    };
+    let dict = PyDict::new(py);
+    dict.set_item("state", state)?;
+    for (i, view) in space.views.iter().enumerate() {
+        let shape = [
+            view.height as usize,
+            view.width as usize,
+            view.channels as usize,
+        ];
+        let pixels = PyArray1::from_slice(py, &bytes[space.range(i)]).reshape(shape)?;
+        dict.set_item(&view.name, pixels)?;
+    }
+    Ok(dict.into_any())
+}
+
+/// A batch of `n` observations: an `(n, obs_dim)` float32 array, or with camera images a dict
+/// of it (`state`) and one `(n, H, W, C)` uint8 array per view. `images` holds each env's
+/// views one after another, env after env.
+pub fn batch_observation<'py>(
+    py: Python<'py>,
+    n: usize,
+    obs: Vec<f32>,
+    space: Option<&ImageSpace>,
+    images: &[u8],
+) -> PyResult<Bound<'py, PyAny>> {
+    let obs_dim = obs.len() / n.max(1);
+    let state = PyArray1::from_vec(py, obs)
+        .reshape([n, obs_dim])?
+        .into_any();
+    let Some(space) = space else {
+        return Ok(state);
+    };
+    let dict = PyDict::new(py);
+    dict.set_item("state", state)?;
+    let per_env = space.len();
+    for (i, view) in space.views.iter().enumerate() {
+        let range = space.range(i);
+        let mut pixels = Vec::with_capacity(n * view.len());
+        for env in images.chunks_exact(per_env.max(1)).take(n) {
+            pixels.extend_from_slice(&env[range.clone()]);
+        }
+        let shape = [
+            n,
+            view.height as usize,
+            view.width as usize,
+            view.channels as usize,
+        ];
+        dict.set_item(&view.name, PyArray1::from_vec(py, pixels).reshape(shape)?)?;
+    }
+    Ok(dict.into_any())
+}
+
 /// `(observation, info)`, what `reset` returns.
-pub fn obs_info<'py>(py: Python<'py>, obs: Vec<f32>, info: &Info) -> PyResult<Bound<'py, PyTuple>> {
-    PyTuple::new(
-        py,
-        [
-            PyArray1::from_vec(py, obs).into_any(),
-            info_dict(py, info)?.into_any(),
-        ],
-    )
+pub fn obs_info<'py>(
+    py: Python<'py>,
+    obs: Bound<'py, PyAny>,
+    info: &Info,
+) -> PyResult<Bound<'py, PyTuple>> {
+    PyTuple::new(py, [obs, info_dict(py, info)?.into_any()])
 }
 
 /// Gymnasium's `metadata` dict: `render_modes` and `render_fps`.

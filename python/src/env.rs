@@ -3,18 +3,17 @@
 
 use crate::convert::{
     Bounds, bounds, f32_values, frame_object, info_dict, insert_path, metadata_dict, obs_info,
-    render_mode_name, table_from_dict,
+    observation, render_mode_name, table_from_dict,
 };
 use crate::errors::{ConfigError, env_error, poisoned, with_open};
-use fairgrasp_env::spaces::BoxSpace;
+use fairgrasp_env::spaces::{BoxSpace, ImageSpace};
 use fairgrasp_env::{Env as _, RescaleAction, registry};
-use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::sync::Mutex;
 
-/// What the Python classes build an env from: the id, the settings table (render mode
-/// included) and whether actions are rescaled to [-1, 1].
+/// What the Python classes build an env from: the id, the settings table (render and
+/// observation modes included) and whether actions are rescaled to [-1, 1].
 pub struct EnvRecipe {
     pub id: String,
     pub table: toml::Table,
@@ -27,23 +26,39 @@ impl EnvRecipe {
         config: Option<&Bound<'_, PyDict>>,
         rescale_action: bool,
         render_mode: Option<&str>,
+        obs_mode: Option<&str>,
     ) -> PyResult<Self> {
         registry::spec(id).map_err(env_error)?;
         let mut table = match config {
             Some(dict) => table_from_dict(dict)?,
             None => toml::Table::new(),
         };
-        if let Some(mode) = render_mode {
-            let has_task_section = registry::default_config(id)
-                .map_err(env_error)?
-                .contains_key("task");
-            if !has_task_section {
+        let defaults = registry::default_config(id).map_err(env_error)?;
+        let modes = [
+            (
+                render_mode,
+                "render_mode",
+                "task",
+                "task.render_mode",
+                "render modes",
+            ),
+            (
+                obs_mode,
+                "obs_mode",
+                "camera",
+                "camera.mode",
+                "observation modes",
+            ),
+        ];
+        for (mode, argument, section, key, what) in modes {
+            let Some(mode) = mode else { continue };
+            if !defaults.contains_key(section) {
                 return Err(ConfigError::new_err(format!(
-                    "invalid setting `render_mode`: {id} has no render modes"
+                    "invalid setting `{argument}`: {id} has no {what}"
                 )));
             }
             let value = toml::Value::String(mode.to_string());
-            insert_path(&mut table, "task.render_mode", value, "render_mode")?;
+            insert_path(&mut table, key, value, argument)?;
         }
         registry::validate(id, &table).map_err(env_error)?;
         Ok(Self {
@@ -72,10 +87,30 @@ pub struct Env {
     table: toml::Table,
     rescale_action: bool,
     observation_space: BoxSpace,
+    image_space: Option<ImageSpace>,
     action_space: BoxSpace,
 }
 
+/// `(name, height, width, channels)` of each camera image.
+pub fn image_views(space: Option<&ImageSpace>) -> Vec<(String, u32, u32, u32)> {
+    let views = space.map(|s| s.views.as_slice()).unwrap_or_default();
+    (views.iter())
+        .map(|v| (v.name.clone(), v.height, v.width, v.channels))
+        .collect()
+}
+
 impl Env {
+    /// The observation as Python sees it (a dict with camera images).
+    fn observation<'py>(
+        &self,
+        py: Python<'py>,
+        obs: Vec<f32>,
+        image: Option<Vec<u8>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let images = self.image_space.as_ref().zip(image.as_deref());
+        observation(py, obs, images)
+    }
+
     fn with_env<T: Send>(
         &self,
         py: Python<'_>,
@@ -91,18 +126,20 @@ impl Env {
     /// sections, or dotted keys). With `rescale_action` the action space is [-1, 1] and mapped
     /// linearly onto the env's own bounds (what `fairgrasp train` learns in).
     #[new]
-    #[pyo3(signature = (env_id, config=None, rescale_action=true, render_mode=None))]
+    #[pyo3(signature = (env_id, config=None, rescale_action=true, render_mode=None, obs_mode=None))]
     fn new(
         py: Python<'_>,
         env_id: &str,
         config: Option<&Bound<'_, PyDict>>,
         rescale_action: bool,
         render_mode: Option<&str>,
+        obs_mode: Option<&str>,
     ) -> PyResult<Self> {
-        let recipe = EnvRecipe::new(env_id, config, rescale_action, render_mode)?;
+        let recipe = EnvRecipe::new(env_id, config, rescale_action, render_mode, obs_mode)?;
         let env = py.detach(|| recipe.build()).map_err(env_error)?;
         Ok(Self {
             observation_space: env.observation_space().clone(),
+            image_space: env.image_space().cloned(),
             action_space: env.action_space().clone(),
             inner: Mutex::new(Some(env)),
             id: recipe.id,
@@ -114,8 +151,11 @@ impl Env {
     /// Starts an episode: `(observation, info)`. A seed restarts the env's random stream.
     #[pyo3(signature = (seed=None))]
     fn reset<'py>(&self, py: Python<'py>, seed: Option<u64>) -> PyResult<Bound<'py, PyTuple>> {
-        let (obs, info) = self.with_env(py, |env| env.reset(seed))?;
-        obs_info(py, obs, &info)
+        let (obs, info, image) = self.with_env(py, |env| {
+            let (obs, info) = env.reset(seed)?;
+            Ok((obs, info, env.image().map(<[u8]>::to_vec)))
+        })?;
+        obs_info(py, self.observation(py, obs, image)?, &info)
     }
 
     /// One control period: `(observation, reward, terminated, truncated, info)`. Actions
@@ -126,11 +166,14 @@ impl Env {
         action: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let action = f32_values(action, "action", &[self.action_space.dim()])?;
-        let step = self.with_env(py, move |env| env.step(&action))?;
+        let (step, image) = self.with_env(py, move |env| {
+            let step = env.step(&action)?;
+            Ok((step, env.image().map(<[u8]>::to_vec)))
+        })?;
         PyTuple::new(
             py,
             [
-                PyArray1::from_vec(py, step.obs).into_any(),
+                self.observation(py, step.obs, image)?,
                 step.reward.into_pyobject(py)?.into_any(),
                 pyo3::types::PyBool::new(py, step.terminated)
                     .to_owned()
@@ -167,6 +210,12 @@ impl Env {
     /// `(low, high)` of the action space, float32.
     fn action_bounds<'py>(&self, py: Python<'py>) -> Bounds<'py> {
         bounds(py, &self.action_space)
+    }
+
+    /// The camera images beside the state, `(name, height, width, channels)` each (empty in the
+    /// `state` observation mode, whose observation is the state vector alone).
+    fn image_views(&self) -> Vec<(String, u32, u32, u32)> {
+        image_views(self.image_space.as_ref())
     }
 
     /// Gymnasium's `metadata`: `render_modes` and `render_fps`.
@@ -227,6 +276,6 @@ pub fn list_envs() -> Vec<(&'static str, &'static str)> {
 #[pyfunction]
 #[pyo3(signature = (env_id, config=None))]
 pub fn env_config(env_id: &str, config: Option<&Bound<'_, PyDict>>) -> PyResult<String> {
-    let recipe = EnvRecipe::new(env_id, config, false, None)?;
+    let recipe = EnvRecipe::new(env_id, config, false, None, None)?;
     registry::config_toml(env_id, &recipe.table).map_err(env_error)
 }

@@ -4,13 +4,14 @@
 //! batch: the observations are copied once, as a whole, from the vector env's buffer.
 
 use crate::convert::{
-    Bounds, bounds, f32_values, frame_object, info_dict, metadata_dict, obs_info, render_mode_name,
+    Bounds, batch_observation, bounds, f32_values, frame_object, info_dict, metadata_dict,
+    obs_info, observation, render_mode_name,
 };
-use crate::env::EnvRecipe;
+use crate::env::{EnvRecipe, image_views};
 use crate::errors::{env_error, poisoned, with_open};
-use fairgrasp_env::spaces::BoxSpace;
+use fairgrasp_env::spaces::{BoxSpace, ImageSpace};
 use fairgrasp_env::{EpisodeEnd, Info, VecEnv as NativeVecEnv, VectorEnv};
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::PyArray1;
 use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
@@ -22,6 +23,7 @@ type Envs = NativeVecEnv<Box<dyn fairgrasp_env::Env>>;
 /// What one step produced, copied out of the vector env's buffers while the GIL was released.
 struct StepOut {
     obs: Vec<f32>,
+    images: Vec<u8>,
     rewards: Vec<f32>,
     terminated: Vec<bool>,
     truncated: Vec<bool>,
@@ -45,6 +47,7 @@ pub struct VecEnv {
     obs_dim: usize,
     act_dim: usize,
     observation_space: BoxSpace,
+    image_space: Option<ImageSpace>,
     action_space: BoxSpace,
     threads: usize,
     started: Instant,
@@ -59,10 +62,13 @@ impl VecEnv {
         with_open(py, &self.inner, "vector env", f)
     }
 
-    fn batch<'py>(&self, py: Python<'py>, obs: Vec<f32>) -> PyResult<Bound<'py, PyAny>> {
-        Ok(PyArray1::from_vec(py, obs)
-            .reshape([self.num_envs, self.obs_dim])?
-            .into_any())
+    fn batch<'py>(
+        &self,
+        py: Python<'py>,
+        obs: Vec<f32>,
+        images: &[u8],
+    ) -> PyResult<Bound<'py, PyAny>> {
+        batch_observation(py, self.num_envs, obs, self.image_space.as_ref(), images)
     }
 
     fn check_index(&self, index: usize) -> PyResult<()> {
@@ -82,7 +88,8 @@ impl VecEnv {
     /// `num_envs` copies of `env_id` built from `config`, stepped by `threads` Rust threads
     /// (0: one per CPU, at most one per env).
     #[new]
-    #[pyo3(signature = (env_id, num_envs, config=None, threads=0, rescale_action=true, render_mode=None))]
+    #[pyo3(signature = (env_id, num_envs, config=None, threads=0, rescale_action=true, render_mode=None, obs_mode=None))]
+    #[allow(clippy::too_many_arguments)] // Python's keyword arguments
     fn new(
         py: Python<'_>,
         env_id: &str,
@@ -91,11 +98,12 @@ impl VecEnv {
         threads: usize,
         rescale_action: bool,
         render_mode: Option<&str>,
+        obs_mode: Option<&str>,
     ) -> PyResult<Self> {
         if num_envs == 0 {
             return Err(PyValueError::new_err("num_envs must be at least 1"));
         }
-        let recipe = EnvRecipe::new(env_id, config, rescale_action, render_mode)?;
+        let recipe = EnvRecipe::new(env_id, config, rescale_action, render_mode, obs_mode)?;
         let envs = py
             .detach(|| {
                 let envs = (0..num_envs)
@@ -109,6 +117,7 @@ impl VecEnv {
             obs_dim: envs.obs_dim(),
             act_dim: envs.act_dim(),
             observation_space: envs.observation_space().clone(),
+            image_space: envs.image_space().cloned(),
             action_space: envs.action_space().clone(),
             threads: envs.num_threads(),
             inner: Mutex::new(Some(envs)),
@@ -136,9 +145,9 @@ impl VecEnv {
     /// infos)`.
     #[pyo3(signature = (seed=None))]
     fn reset<'py>(&self, py: Python<'py>, seed: Option<u64>) -> PyResult<Bound<'py, PyTuple>> {
-        let (obs, infos) = self.with_envs(py, |envs| {
+        let (obs, images, infos) = self.with_envs(py, |envs| {
             let obs = envs.reset(seed)?.to_vec();
-            Ok((obs, envs.reset_infos().to_vec()))
+            Ok((obs, envs.images().to_vec(), envs.reset_infos().to_vec()))
         })?;
         let infos = PyList::new(
             py,
@@ -147,7 +156,7 @@ impl VecEnv {
                 .map(|info| info_dict(py, info))
                 .collect::<PyResult<Vec<_>>>()?,
         )?;
-        PyTuple::new(py, [self.batch(py, obs)?, infos.into_any()])
+        PyTuple::new(py, [self.batch(py, obs, &images)?, infos.into_any()])
     }
 
     /// Resets env `index` alone: `(observation, info)`.
@@ -159,11 +168,13 @@ impl VecEnv {
         seed: Option<u64>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         self.check_index(index)?;
-        let (obs, info) = self.with_envs(py, |envs| {
+        let (obs, image, info) = self.with_envs(py, |envs| {
             let obs = envs.reset_env(index, seed)?.to_vec();
-            Ok((obs, envs.reset_infos()[index].clone()))
+            let image = env_at(envs, index)?.image().map(<[u8]>::to_vec);
+            Ok((obs, image, envs.reset_infos()[index].clone()))
         })?;
-        obs_info(py, obs, &info)
+        let images = self.image_space.as_ref().zip(image.as_deref());
+        obs_info(py, observation(py, obs, images)?, &info)
     }
 
     /// Steps every env with its row of `actions` (`(num_envs, act_dim)`), resetting those whose
@@ -180,6 +191,7 @@ impl VecEnv {
             let step = envs.step(&actions)?;
             Ok(StepOut {
                 obs: step.observations.to_vec(),
+                images: step.images.to_vec(),
                 rewards: step.rewards.to_vec(),
                 terminated: step.terminated.to_vec(),
                 truncated: step.truncated.to_vec(),
@@ -192,9 +204,10 @@ impl VecEnv {
         for (i, (info, end)) in out.infos.iter().zip(out.ends).enumerate() {
             let dict = info_dict(py, info)?;
             if let Some(end) = end {
+                let images = self.image_space.as_ref().zip(Some(&end.terminal_image[..]));
                 dict.set_item(
                     "terminal_observation",
-                    PyArray1::from_vec(py, end.terminal_observation),
+                    observation(py, end.terminal_observation, images)?,
                 )?;
                 dict.set_item(
                     "TimeLimit.truncated",
@@ -212,7 +225,7 @@ impl VecEnv {
         PyTuple::new(
             py,
             [
-                self.batch(py, out.obs)?,
+                self.batch(py, out.obs, &out.images)?,
                 PyArray1::from_vec(py, out.rewards).into_any(),
                 PyArray1::from_vec(py, out.terminated).into_any(),
                 PyArray1::from_vec(py, out.truncated).into_any(),
@@ -223,8 +236,10 @@ impl VecEnv {
 
     /// The current observations (those last returned).
     fn observations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let obs = self.with_envs(py, |envs| Ok(envs.observations().to_vec()))?;
-        self.batch(py, obs)
+        let (obs, images) = self.with_envs(py, |envs| {
+            Ok((envs.observations().to_vec(), envs.images().to_vec()))
+        })?;
+        self.batch(py, obs, &images)
     }
 
     /// Env `index`'s frame in the render mode, or None without one.
@@ -243,6 +258,12 @@ impl VecEnv {
     /// `(low, high)` of one env's observation space.
     fn observation_bounds<'py>(&self, py: Python<'py>) -> Bounds<'py> {
         bounds(py, &self.observation_space)
+    }
+
+    /// The camera images beside the state, `(name, height, width, channels)` each (empty in the
+    /// `state` observation mode).
+    fn image_views(&self) -> Vec<(String, u32, u32, u32)> {
+        image_views(self.image_space.as_ref())
     }
 
     /// `(low, high)` of one env's action space.

@@ -74,11 +74,20 @@ pub fn overlay(base: &mut toml::Table, top: &toml::Table) {
     }
 }
 
-/// Deserialises a TOML table into `C` (through text, so errors quote the line and name the key).
+/// Deserialises a TOML table into `C` (through text, so errors quote the line); the error's key
+/// is the dotted path of the value that failed (`camera.mode`), `config` when it has none.
 pub fn from_table<C: DeserializeOwned>(table: toml::Table) -> Result<C> {
     let text =
         toml::to_string(&table).map_err(|e| EnvError::config("(overrides)", e.to_string()))?;
-    toml::from_str(&text).map_err(|e| EnvError::config("config", e.to_string()))
+    let deserializer =
+        toml::Deserializer::parse(&text).map_err(|e| EnvError::config("config", e.to_string()))?;
+    serde_path_to_error::deserialize(deserializer).map_err(|e| {
+        let key = match e.path().to_string() {
+            path if path == "." => "config".to_string(),
+            path => path,
+        };
+        EnvError::config(key, e.into_inner().to_string())
+    })
 }
 
 /// Reads a TOML file into a table; errors name the file.

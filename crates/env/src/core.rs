@@ -2,7 +2,7 @@
 //! `step(action) -> (obs, reward, terminated, truncated, info)`, Box spaces, render modes.
 
 use crate::error::Result as EnvResult;
-use crate::spaces::BoxSpace;
+use crate::spaces::{BoxSpace, ImageSpace};
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
 
@@ -260,6 +260,20 @@ pub trait Env: Send {
         0
     }
 
+    /// The camera images each observation carries besides the state vector (a Gymnasium `Dict`
+    /// observation: the state under `state`, each image under its view's name); `None` when
+    /// the environment observes no images.
+    fn image_space(&self) -> Option<&ImageSpace> {
+        None
+    }
+
+    /// The images of the observation [`Env::reset`] or [`Env::step`] returned last:
+    /// [`ImageSpace::len`] bytes, the views in order. `None` without an image space or before
+    /// the first reset.
+    fn image(&self) -> Option<&[u8]> {
+        None
+    }
+
     /// Releases resources. The environment must not be used afterwards.
     fn close(&mut self) {}
 }
@@ -298,6 +312,14 @@ impl<E: Env + ?Sized> Env for Box<E> {
 
     fn privileged_dim(&self) -> usize {
         (**self).privileged_dim()
+    }
+
+    fn image_space(&self) -> Option<&ImageSpace> {
+        (**self).image_space()
+    }
+
+    fn image(&self) -> Option<&[u8]> {
+        (**self).image()
     }
 
     fn close(&mut self) {

@@ -34,7 +34,7 @@ pub mod vector;
 pub mod wrappers;
 
 pub use crate::core::{Env, EpisodeEvent, Info, NamedValues, Step};
-pub use arm::{ActionMode, ArmEnv, ArmState, Task};
+pub use arm::{ActionMode, ArmEnv, ArmState, ObsMode, Task};
 pub use error::{EnvError, Result};
 pub use fairgrasp_render as render;
 pub use fairgrasp_sim as sim;

@@ -1,4 +1,4 @@
-//! Gymnasium's `Box` space: a product of intervals, float32.
+//! Gymnasium's `Box` space (a product of intervals, float32) and the camera images beside it.
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -74,6 +74,59 @@ impl BoxSpace {
     }
 }
 
+/// One camera's image in an observation: `height × width × channels` bytes, row-major, top row
+/// first (Gymnasium's `Box(0, 255, (height, width, channels), uint8)`).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ImageView {
+    /// The observation key (`scene_rgb`, `wrist_depth`, …).
+    pub name: String,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// Bytes per pixel: 3 (RGB), 1 (depth) or 4 (RGB and depth).
+    pub channels: u32,
+}
+
+impl ImageView {
+    /// Bytes of one image.
+    pub fn len(&self) -> usize {
+        self.height as usize * self.width as usize * self.channels as usize
+    }
+
+    /// Whether the image has no pixels (never, for a checked camera).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The camera images an environment observes besides its state vector: the `u8` entries of a
+/// Gymnasium `Dict` observation. An environment's images are one buffer of
+/// [`ImageSpace::len`] bytes, the views one after another.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ImageSpace {
+    /// The images, in buffer order.
+    pub views: Vec<ImageView>,
+}
+
+impl ImageSpace {
+    /// Bytes of all the images.
+    pub fn len(&self) -> usize {
+        self.views.iter().map(ImageView::len).sum()
+    }
+
+    /// Whether there are no images.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Where view `i` lies in the buffer.
+    pub fn range(&self, i: usize) -> std::ops::Range<usize> {
+        let start: usize = self.views[..i].iter().map(ImageView::len).sum();
+        start..start + self.views[i].len()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,5 +146,22 @@ mod tests {
         assert!(!space.contains(&[f32::NAN, 0.0, 0.0]));
         assert!(BoxSpace::unbounded(3).contains(&[1e30, -1e30, 0.0]));
         assert!(!BoxSpace::unbounded(3).is_bounded());
+    }
+
+    #[test]
+    fn image_views_lie_one_after_another_in_the_buffer() {
+        let view = |name: &str, channels| ImageView {
+            name: name.into(),
+            height: 4,
+            width: 5,
+            channels,
+        };
+        let space = ImageSpace {
+            views: vec![view("scene_rgb", 3), view("wrist_depth", 1)],
+        };
+        assert_eq!(space.len(), 80);
+        assert_eq!(space.range(0), 0..60);
+        assert_eq!(space.range(1), 60..80);
+        assert!(ImageSpace::default().is_empty());
     }
 }

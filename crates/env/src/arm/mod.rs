@@ -13,6 +13,7 @@
 //! - [`task`]: [`Task`], what a task is to this base, and [`ArmEnvConfig`], its configuration;
 //! - [`config`]: the shared configuration sections (randomisation, observation noise).
 
+pub mod camera;
 pub mod config;
 pub mod control;
 pub mod drives;
@@ -25,6 +26,7 @@ pub mod shapes;
 pub mod state;
 pub mod task;
 
+pub use camera::{CameraObsConfig, Cameras, ObsMode, SceneCameraConfig, WristCameraConfig};
 pub use config::{ObservationNoise, RandomizationConfig, ShapeKind, ShapesConfig};
 pub use control::{ActionMapper, ActionMode, Command, ControlConfig, MappingEvent};
 pub use drives::{ArmDrives, DrivesConfig};
@@ -41,7 +43,7 @@ pub use task::{
 use crate::core::{Env, EpisodeEvent, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::{EnvError, Result};
 use crate::random::uniform;
-use crate::spaces::BoxSpace;
+use crate::spaces::{BoxSpace, ImageSpace};
 use fairgrasp_render::Renderer;
 use fairgrasp_sim::SimError;
 use fairgrasp_sim::kinematics::SerialChain;
@@ -123,6 +125,11 @@ pub struct ArmEnv<T: Task> {
     nominal_damping: Vec<f32>,
     rng: ChaCha8Rng,
     observation_space: BoxSpace,
+    /// The task's observation (the privileged state's), which a pixel mode does not show the
+    /// policy; the observation space in [`ObsMode::State`].
+    task_space: BoxSpace,
+    /// The cameras of a pixel mode (`[camera]`).
+    cameras: Option<Cameras>,
     action_space: BoxSpace,
     noise_groups: Vec<(Range<usize>, NoiseGroup)>,
     episode: Option<Episode>,
@@ -147,16 +154,21 @@ fn reported(mapper: &ActionMapper, state: &ArmState, offset: &[f32]) -> Option<A
     Some(reported)
 }
 
-/// The task's observation of `state`, then the speed scale when the policy observes it.
+/// The task's observation of `state` (in a pixel mode the arm's own readings instead), then
+/// the speed scale when the policy observes it.
 fn write_observation<T: Task>(
     task: &T,
+    mode: ObsMode,
     observe_speed_scale: bool,
     state: &ArmState,
     previous_action: &[f32],
     speed_scale: f32,
     out: &mut ObsWriter,
 ) {
-    task.observe(state, previous_action, out);
+    match mode.has_images() {
+        true => observation::arm_observation(state, previous_action, out),
+        false => task.observe(state, previous_action, out),
+    }
     if observe_speed_scale {
         out.push1(NoiseGroup::None, speed_scale);
     }
@@ -184,26 +196,36 @@ impl<T: Task> ArmEnv<T> {
                 robot.model.joints[robot.joints[j].model_index].damping as f32
             })
             .collect();
-        // Write one observation to learn its length and noise groups.
+        // Write one observation to learn its length and noise groups (and the task's own, which
+        // a pixel mode's privileged state holds).
         let state = ArmState::from_scene(&scene);
         let facts = EstimatorFacts::new(chain.clone(), &state);
-        let (mut obs, mut noise_groups) = (Vec::new(), Vec::new());
         let zeros = vec![0.0; action_space.dim()];
-        write_observation(
-            &task,
-            config.control.observe_speed_scale,
-            &state,
-            &zeros,
-            1.0,
-            &mut ObsWriter::recording(&mut obs, &mut noise_groups),
-        );
-        let mut high = vec![0.0; obs.len()];
-        for (range, group) in &noise_groups {
-            high[range.clone()].fill(group.bound());
-        }
-        let low = high.iter().map(|h| -h).collect();
+        let space = |mode| {
+            let (mut obs, mut noise_groups) = (Vec::new(), Vec::new());
+            write_observation(
+                &task,
+                mode,
+                config.control.observe_speed_scale,
+                &state,
+                &zeros,
+                1.0,
+                &mut ObsWriter::recording(&mut obs, &mut noise_groups),
+            );
+            let mut high = vec![0.0; obs.len()];
+            for (range, group) in &noise_groups {
+                high[range.clone()].fill(group.bound());
+            }
+            let low = high.iter().map(|h| -h).collect();
+            (BoxSpace::new(low, high), noise_groups)
+        };
+        let (observation_space, noise_groups) = space(config.camera.mode);
+        let (task_space, _) = space(ObsMode::State);
+        let cameras = Cameras::new(&config.camera, &scene)?;
         Ok(Self {
-            observation_space: BoxSpace::new(low, high),
+            observation_space,
+            task_space,
+            cameras,
             noise_groups,
             action_space,
             mapper,
@@ -274,12 +296,19 @@ impl<T: Task> ArmEnv<T> {
     ) {
         write_observation(
             &self.task,
+            self.config.camera.mode,
             self.config.control.observe_speed_scale,
             state,
             previous_action,
             speed_scale,
             &mut ObsWriter::new(obs),
         );
+    }
+
+    /// Whether [`Info::privileged`] carries the task's observation of the true state:
+    /// `readings.privileged`, or a pixel mode (whose policy never sees the object's pose).
+    fn reports_privileged(&self) -> bool {
+        self.config.readings.privileged || self.config.camera.mode.has_images()
     }
 
     /// The state as the controller reports it, which the last observation was computed from:
@@ -452,12 +481,30 @@ impl<T: Task> ArmEnv<T> {
     /// [`Info::privileged`] for the true `state` (see [`ReadingsConfig::privileged`]); empty
     /// when it is off.
     fn privileged(&self, state: &ArmState, previous_action: &[f32], speed_scale: f32) -> Vec<f32> {
-        if !self.config.readings.privileged {
+        if !self.reports_privileged() {
             return Vec::new();
         }
-        let mut values = self.observation_of(state, previous_action, speed_scale);
+        let mut values = Vec::with_capacity(self.task_space.dim() + 1);
+        write_observation(
+            &self.task,
+            ObsMode::State,
+            self.config.control.observe_speed_scale,
+            state,
+            previous_action,
+            speed_scale,
+            &mut ObsWriter::new(&mut values),
+        );
+        self.task_space.clip(&mut values);
         values.push(speed_scale);
         values
+    }
+
+    /// Draws the cameras' images of the scene as it is now (nothing in [`ObsMode::State`]).
+    fn capture(&mut self) -> Result<()> {
+        match self.cameras.as_mut() {
+            Some(cameras) => cameras.capture(&self.scene),
+            None => Ok(()),
+        }
     }
 
     fn no_op_action(&self) -> Vec<f32> {
@@ -539,10 +586,19 @@ impl<T: Task> Env for ArmEnv<T> {
     }
 
     fn privileged_dim(&self) -> usize {
-        match self.config.readings.privileged {
-            true => self.observation_space.dim() + 1,
+        match self.reports_privileged() {
+            true => self.task_space.dim() + 1,
             false => 0,
         }
+    }
+
+    fn image_space(&self) -> Option<&ImageSpace> {
+        self.cameras.as_ref().map(Cameras::space)
+    }
+
+    fn image(&self) -> Option<&[u8]> {
+        self.episode.as_ref()?;
+        self.cameras.as_ref().map(Cameras::image)
     }
 
     fn action_space(&self) -> &BoxSpace {
@@ -624,6 +680,7 @@ impl<T: Task> Env for ArmEnv<T> {
             observed,
             privileged: privileged.clone(),
         });
+        self.capture()?;
         Ok((
             obs,
             Info {
@@ -763,6 +820,7 @@ impl<T: Task> Env for ArmEnv<T> {
             return Ok(self.non_finite_step());
         }
         let privileged = self.privileged(&state, &normalised, speed_scale);
+        self.capture()?;
         let mut evaluation = self.task.evaluate(&self.scene, &state);
         let mut extras = evaluation.flags.named();
         if watch_force {

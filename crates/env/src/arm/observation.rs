@@ -161,3 +161,19 @@ pub(crate) fn rich_observation(
     );
     out.push(None, previous_action);
 }
+
+/// What the real arm reports, for pixel policies (the `[camera]` modes): joints, joint speeds,
+/// TCP position and orientation (two rotation-matrix columns), the gripper opening and the
+/// previous action (22 values plus the action). Nothing about the objects: the camera shows them.
+pub(crate) fn arm_observation(s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
+    use NoiseGroup::*;
+    out.push(JointPosition, &s.q);
+    out.push(JointVelocity, &s.qd);
+    out.push3(EePosition, &s.tcp.translation.vector);
+    let m = s.tcp.rotation.to_rotation_matrix();
+    for c in 0..2 {
+        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
+    }
+    out.push1(Gripper, s.gripper_opening);
+    out.push(None, previous_action);
+}

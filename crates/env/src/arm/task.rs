@@ -3,6 +3,7 @@
 //! rule ([`SuccessJudge`]), and [`ArmEnvConfig`], the configuration that joins the task's
 //! sections to the shared ones. One file, because each names the others.
 
+use crate::arm::camera::CameraObsConfig;
 use crate::arm::config::RandomizationConfig;
 use crate::arm::control::ControlConfig;
 use crate::arm::observation::ObsWriter;
@@ -181,6 +182,8 @@ pub struct ArmEnvConfig<T, R> {
     pub render: CameraConfig,
     /// The policy's observation from synthesized controller readings, as on the arm.
     pub readings: ReadingsConfig,
+    /// The `[camera]` section: the observation mode and the cameras of the pixel modes.
+    pub camera: CameraObsConfig,
 }
 
 impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
@@ -198,6 +201,7 @@ impl<T: TaskSettings, R: RewardSettings> ArmEnvConfig<T, R> {
         self.randomization.validate()?;
         self.shapes.validate()?;
         self.readings.validate()?;
+        self.camera.validate()?;
         if !self.readings.enabled && self.control.speed_scales.iter().any(|&s| s != 1.0) {
             return Err(EnvError::config(
                 "control.speed_scales",

@@ -10,6 +10,8 @@
 //!   the new episode's first observation, and the finished episode's last observation, its
 //!   statistics and the reset info are kept in [`VecStep::episode_ends`] (SB3's
 //!   `info["terminal_observation"]`, `info["episode"]` and `reset_infos`);
+//! - camera images (an env's [`Env::image`]) come back beside the observations as one `u8`
+//!   batch (`num_envs × image_len` bytes, [`VecStep::images`]), never converted to floats;
 //! - `reset(Some(seed))` resets environment `i` with `seed + i`, like SB3's `VecEnv.seed(seed)`
 //!   and Gymnasium's `reset(seed=seed)` on a vector env;
 //! - results do not depend on the number of threads: each environment owns its random stream
@@ -20,7 +22,7 @@
 
 use crate::core::{Env, Info};
 use crate::error::{EnvError, Result};
-use crate::spaces::BoxSpace;
+use crate::spaces::{BoxSpace, ImageSpace};
 use crate::wrappers::{EpisodeAccumulator, EpisodeStats};
 
 mod pool;
@@ -35,6 +37,8 @@ pub struct EpisodeEnd {
     /// observation row, which already belongs to the next episode. Vector wrappers that
     /// transform observations transform this one too.
     pub terminal_observation: Vec<f32>,
+    /// The camera images of the last observation (empty without an image space).
+    pub terminal_image: Vec<u8>,
     /// Return, length and success of the finished episode (SB3 `Monitor`'s `info["episode"]`).
     /// Always in the environment's own reward units, also under reward normalisation.
     pub episode: EpisodeStats,
@@ -63,6 +67,11 @@ pub struct VecStep<'a> {
     pub episode_ends: &'a [Option<EpisodeEnd>],
     /// Values per observation row.
     pub obs_dim: usize,
+    /// `num_envs × image_len` bytes: each environment's camera images (empty without an image
+    /// space); rows as [`Self::observations`]'.
+    pub images: &'a [u8],
+    /// Bytes per environment in [`Self::images`].
+    pub image_len: usize,
 }
 
 impl<'a> VecStep<'a> {
@@ -77,6 +86,14 @@ impl<'a> VecStep<'a> {
     /// When `i >= num_envs()`.
     pub fn obs(&self, i: usize) -> &'a [f32] {
         &self.observations[i * self.obs_dim..(i + 1) * self.obs_dim]
+    }
+
+    /// Environment `i`'s camera images (empty without an image space).
+    ///
+    /// # Panics
+    /// When `i >= num_envs()`.
+    pub fn image(&self, i: usize) -> &'a [u8] {
+        &self.images[i * self.image_len..(i + 1) * self.image_len]
     }
 
     /// Whether environment `i`'s episode ended (terminated or truncated) at this step.
@@ -124,6 +141,17 @@ pub trait VectorEnv {
         0
     }
 
+    /// The camera images of one environment's observation; `None` when it observes none.
+    fn image_space(&self) -> Option<&ImageSpace> {
+        None
+    }
+
+    /// The current `num_envs × image_len` bytes of images (those of [`Self::observations`]);
+    /// empty without an image space.
+    fn images(&self) -> &[u8] {
+        &[]
+    }
+
     /// Resets every environment: `Some(seed)` resets environment `i` with `seed + i`
     /// (wrapping), `None` continues each environment's random stream. Returns the
     /// `num_envs × obs_dim` first observations.
@@ -162,6 +190,13 @@ struct Slot<E> {
     episode: EpisodeAccumulator,
     /// Why the environment cannot be stepped before a reset (never reset, failed step).
     needs_reset: Option<&'static str>,
+}
+
+/// Values per observation row and bytes of images per environment.
+#[derive(Clone, Copy)]
+struct Dims {
+    obs: usize,
+    image: usize,
 }
 
 /// What one environment's step produced.
@@ -242,21 +277,30 @@ impl<E: Env> Slot<E> {
         }
     }
 
-    fn reset(
-        &mut self,
-        index: usize,
-        seed: Option<u64>,
-        obs_dim: usize,
-    ) -> Result<(Vec<f32>, Info)> {
+    /// The environment's current images, which must be `image_len` bytes.
+    fn image(&self, index: usize, image_len: usize) -> Result<&[u8]> {
+        let image = self.env.image().unwrap_or(&[]);
+        if image.len() == image_len {
+            Ok(image)
+        } else {
+            Err(EnvError::Usage(format!(
+                "env {index} returned {} bytes of images; its image space has {image_len}",
+                image.len()
+            )))
+        }
+    }
+
+    fn reset(&mut self, index: usize, seed: Option<u64>, dims: Dims) -> Result<(Vec<f32>, Info)> {
         self.needs_reset = Some("its last reset failed");
         self.episode = EpisodeAccumulator::default();
         let (obs, info) = guarded(index, "reset", || self.env.reset(seed))?;
-        Self::check_obs(index, &obs, obs_dim)?;
+        Self::check_obs(index, &obs, dims.obs)?;
+        self.image(index, dims.image)?;
         self.needs_reset = None;
         Ok((obs, info))
     }
 
-    fn step(&mut self, index: usize, action: &[f32], obs_dim: usize) -> Result<Outcome> {
+    fn step(&mut self, index: usize, action: &[f32], dims: Dims) -> Result<Outcome> {
         let step = match guarded(index, "step", || self.env.step(action)) {
             Ok(step) => step,
             Err(e) => {
@@ -264,7 +308,8 @@ impl<E: Env> Slot<E> {
                 return Err(e);
             }
         };
-        if let Err(e) = Self::check_obs(index, &step.obs, obs_dim) {
+        let checked = Self::check_obs(index, &step.obs, dims.obs);
+        if let Err(e) = checked.and_then(|()| self.image(index, dims.image).map(|_| ())) {
             self.needs_reset = Some("its last step failed");
             return Err(e);
         }
@@ -280,8 +325,9 @@ impl<E: Env> Slot<E> {
             });
         }
         let episode = self.episode.finish(&step.info);
+        let terminal_image = self.env.image().unwrap_or(&[]).to_vec();
         let (obs, reset_info) = self
-            .reset(index, None, obs_dim)
+            .reset(index, None, dims)
             .map_err(|e| with_note(e, "(in the automatic reset after its episode ended)"))?;
         Ok(Outcome {
             obs,
@@ -291,6 +337,7 @@ impl<E: Env> Slot<E> {
             info: step.info,
             end: Some(EpisodeEnd {
                 terminal_observation: step.obs,
+                terminal_image,
                 episode,
                 reset_info,
             }),
@@ -302,6 +349,7 @@ impl<E: Env> Slot<E> {
 /// own environments' rows, so nothing is gathered (or freed) on the caller's thread afterwards.
 struct Row<'a> {
     obs: &'a mut [f32],
+    image: &'a mut [u8],
     reward: &'a mut f32,
     terminated: &'a mut bool,
     truncated: &'a mut bool,
@@ -316,6 +364,8 @@ struct RowPtrs<E> {
     slots: *mut Slot<E>,
     obs: *mut f32,
     obs_dim: usize,
+    images: *mut u8,
+    image_len: usize,
     rewards: *mut f32,
     terminated: *mut bool,
     truncated: *mut bool,
@@ -332,10 +382,12 @@ impl<E> RowPtrs<E> {
     unsafe fn at<'a>(&self, i: usize) -> (&'a mut Slot<E>, Row<'a>) {
         unsafe {
             let obs = self.obs.add(i * self.obs_dim);
+            let image = self.images.add(i * self.image_len);
             (
                 &mut *self.slots.add(i),
                 Row {
                     obs: std::slice::from_raw_parts_mut(obs, self.obs_dim),
+                    image: std::slice::from_raw_parts_mut(image, self.image_len),
                     reward: &mut *self.rewards.add(i),
                     terminated: &mut *self.terminated.add(i),
                     truncated: &mut *self.truncated.add(i),
@@ -381,7 +433,9 @@ pub struct VecEnv<E: Env> {
     threads: usize,
     observation_space: BoxSpace,
     action_space: BoxSpace,
+    image_space: Option<ImageSpace>,
     observations: Vec<f32>,
+    images: Vec<u8>,
     rewards: Vec<f32>,
     terminated: Vec<bool>,
     truncated: Vec<bool>,
@@ -407,7 +461,15 @@ impl<E: Env> VecEnv<E> {
         };
         let observation_space = first.observation_space().clone();
         let action_space = first.action_space().clone();
+        let image_space = first.image_space().cloned();
         for (i, env) in envs.iter().enumerate().skip(1) {
+            if env.image_space() != image_space.as_ref() {
+                return Err(EnvError::Usage(format!(
+                    "env {i}'s camera images differ from env 0's: {:?} vs {:?}",
+                    env.image_space(),
+                    image_space
+                )));
+            }
             if *env.observation_space() != observation_space {
                 return Err(EnvError::Usage(format!(
                     "env {i}'s observation space differs from env 0's: {:?} vs {:?}",
@@ -440,6 +502,7 @@ impl<E: Env> VecEnv<E> {
             None
         };
         let obs_dim = observation_space.dim();
+        let image_len = image_space.as_ref().map_or(0, ImageSpace::len);
         Ok(Self {
             slots: envs
                 .into_iter()
@@ -453,7 +516,9 @@ impl<E: Env> VecEnv<E> {
             threads,
             observation_space,
             action_space,
+            image_space,
             observations: vec![0.0; n * obs_dim],
+            images: vec![0; n * image_len],
             rewards: vec![0.0; n],
             terminated: vec![false; n],
             truncated: vec![false; n],
@@ -500,6 +565,8 @@ impl<E: Env> VecEnv<E> {
             slots: self.slots.as_mut_ptr(),
             obs: self.observations.as_mut_ptr(),
             obs_dim: self.observation_space.dim(),
+            images: self.images.as_mut_ptr(),
+            image_len: self.dims().image,
             rewards: self.rewards.as_mut_ptr(),
             terminated: self.terminated.as_mut_ptr(),
             truncated: self.truncated.as_mut_ptr(),
@@ -545,6 +612,13 @@ impl<E: Env> VecEnv<E> {
         })
     }
 
+    fn dims(&self) -> Dims {
+        Dims {
+            obs: self.observation_space.dim(),
+            image: self.image_space.as_ref().map_or(0, ImageSpace::len),
+        }
+    }
+
     fn check_actions(&self, actions: &[f32]) -> Result<()> {
         let (n, act_dim) = (self.slots.len(), self.action_space.dim());
         if actions.len() != n * act_dim {
@@ -587,15 +661,16 @@ impl<E: Env> VectorEnv for VecEnv<E> {
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<&[f32]> {
-        let obs_dim = self.observation_space.dim();
+        let dims = self.dims();
         self.for_each_env(|i, slot, row| {
             *row.episode_end = None;
             *row.reward = 0.0;
             *row.terminated = false;
             *row.truncated = false;
-            match slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), obs_dim) {
+            match slot.reset(i, seed.map(|s| s.wrapping_add(i as u64)), dims) {
                 Ok((obs, info)) => {
                     row.obs.copy_from_slice(&obs);
+                    row.image.copy_from_slice(slot.env.image().unwrap_or(&[]));
                     *row.reset_info = info;
                 }
                 Err(e) => *row.error = Some(e),
@@ -606,12 +681,15 @@ impl<E: Env> VectorEnv for VecEnv<E> {
 
     fn reset_env(&mut self, index: usize, seed: Option<u64>) -> Result<&[f32]> {
         let n = self.slots.len();
-        let obs_dim = self.observation_space.dim();
+        let dims = self.dims();
+        let obs_dim = dims.obs;
         let slot = self
             .slots
             .get_mut(index)
             .ok_or_else(|| EnvError::Usage(format!("env {index} does not exist; there are {n}")))?;
-        let (obs, info) = slot.reset(index, seed, obs_dim)?;
+        let (obs, info) = slot.reset(index, seed, dims)?;
+        let image = &mut self.images[index * dims.image..(index + 1) * dims.image];
+        image.copy_from_slice(slot.env.image().unwrap_or(&[]));
         let row = &mut self.observations[index * obs_dim..(index + 1) * obs_dim];
         row.copy_from_slice(&obs);
         self.reset_infos[index] = info;
@@ -623,6 +701,14 @@ impl<E: Env> VectorEnv for VecEnv<E> {
         self.slots
             .first()
             .map_or(0, |slot| slot.env.privileged_dim())
+    }
+
+    fn image_space(&self) -> Option<&ImageSpace> {
+        self.image_space.as_ref()
+    }
+
+    fn images(&self) -> &[u8] {
+        &self.images
     }
 
     fn reset_infos(&self) -> &[Info] {
@@ -645,11 +731,12 @@ impl<E: Env> VectorEnv for VecEnv<E> {
             )));
         }
         self.check_actions(actions)?;
-        let (obs_dim, act_dim) = (self.observation_space.dim(), self.action_space.dim());
+        let (dims, act_dim) = (self.dims(), self.action_space.dim());
         self.for_each_env(|i, slot, row| {
-            match slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], obs_dim) {
+            match slot.step(i, &actions[i * act_dim..(i + 1) * act_dim], dims) {
                 Ok(o) => {
                     row.obs.copy_from_slice(&o.obs);
+                    row.image.copy_from_slice(slot.env.image().unwrap_or(&[]));
                     *row.reward = o.reward;
                     *row.terminated = o.terminated;
                     *row.truncated = o.truncated;
@@ -672,7 +759,9 @@ impl<E: Env> VectorEnv for VecEnv<E> {
             truncated: &self.truncated,
             infos: &self.infos,
             episode_ends: &self.episode_ends,
-            obs_dim,
+            obs_dim: dims.obs,
+            images: &self.images,
+            image_len: dims.image,
         })
     }
 

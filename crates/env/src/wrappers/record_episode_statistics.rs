@@ -2,7 +2,7 @@
 
 use crate::core::{Env, Frame, Info, Metadata, NamedValues, RenderMode, Step};
 use crate::error::Result;
-use crate::spaces::BoxSpace;
+use crate::spaces::{BoxSpace, ImageSpace};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -182,6 +182,14 @@ impl<E: Env> Env for RecordEpisodeStatistics<E> {
 
     fn privileged_dim(&self) -> usize {
         self.env.privileged_dim()
+    }
+
+    fn image_space(&self) -> Option<&ImageSpace> {
+        self.env.image_space()
+    }
+
+    fn image(&self) -> Option<&[u8]> {
+        self.env.image()
     }
 
     fn close(&mut self) {

@@ -2,7 +2,7 @@
 
 use crate::core::{Env, Frame, Info, Metadata, RenderMode, Step};
 use crate::error::{EnvError, Result};
-use crate::spaces::BoxSpace;
+use crate::spaces::{BoxSpace, ImageSpace};
 
 /// Maps actions from `[-1, 1]^n` affinely onto the inner environment's action box, like
 /// Gymnasium's `RescaleAction(env, min_action=-1.0, max_action=1.0)` (and what SB3 expects of
@@ -153,6 +153,14 @@ impl<E: Env> Env for RescaleAction<E> {
 
     fn privileged_dim(&self) -> usize {
         self.env.privileged_dim()
+    }
+
+    fn image_space(&self) -> Option<&ImageSpace> {
+        self.env.image_space()
+    }
+
+    fn image(&self) -> Option<&[u8]> {
+        self.env.image()
     }
 
     fn close(&mut self) {

@@ -3,7 +3,7 @@
 use crate::core::Info;
 use crate::error::{EnvError, Result};
 use crate::running_stats::RunningMeanStd;
-use crate::spaces::BoxSpace;
+use crate::spaces::{BoxSpace, ImageSpace};
 use crate::vector::{EpisodeEnd, VecStep, VectorEnv};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -488,6 +488,15 @@ impl<V: VectorEnv> VectorEnv for VecNormalize<V> {
         self.venv.privileged_dim()
     }
 
+    /// Images pass through unnormalised (they stay bytes; the network scales them).
+    fn image_space(&self) -> Option<&ImageSpace> {
+        self.venv.image_space()
+    }
+
+    fn images(&self) -> &[u8] {
+        self.venv.images()
+    }
+
     fn reset_infos(&self) -> &[Info] {
         self.venv.reset_infos()
     }
@@ -547,6 +556,8 @@ impl<V: VectorEnv> VectorEnv for VecNormalize<V> {
             infos: step.infos,
             episode_ends: &self.episode_ends,
             obs_dim: step.obs_dim,
+            images: step.images,
+            image_len: step.image_len,
         })
     }
 
