@@ -12,6 +12,7 @@
 
 pub mod actor;
 pub mod actor_critic;
+pub mod cnn;
 pub mod critics;
 pub mod deterministic;
 pub mod features;
