@@ -17,6 +17,7 @@ pub mod critics;
 pub mod deterministic;
 pub mod features;
 pub mod net_config;
+pub mod pixel_actor;
 pub mod squashed_gaussian;
 
 pub use actor::{ActorDescription, ActorNet, Head};

@@ -1,0 +1,530 @@
+//! [`PixelActor`]: a policy that acts from camera images and the arm's own readings (SB3's
+//! `MultiInputPolicy` with its `CombinedExtractor`): one CNN encoder per camera, the state
+//! vector standardised, both concatenated into an MLP head that outputs the action. Its forward
+//! and backward passes run on the written-out kernels; the weights live in a [`VarMap`] so that
+//! they save as every model's do.
+
+use crate::kernels::dense::{linear_backward, linear_forward, relu, relu_backward};
+use crate::kernels::mlp::VarValues;
+use crate::nn::adam::Adam;
+use crate::policies::cnn::{CnnArch, CnnCache, CnnEncoder};
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{Init, VarMap};
+use fairgrasp_env::spaces::ImageSpace;
+use rand::{Rng, RngCore};
+use serde::{Deserialize, Serialize};
+
+/// The shape of a pixel actor (`[distill.actor]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PixelActorConfig {
+    /// The convolution stack of every camera's encoder.
+    pub encoder: CnnArch,
+    /// Values each encoder gives.
+    pub features: usize,
+    /// Hidden layers of the head (ReLU), input side first.
+    pub net_arch: Vec<usize>,
+}
+
+impl Default for PixelActorConfig {
+    fn default() -> Self {
+        Self {
+            encoder: CnnArch::FastCnn,
+            features: 64,
+            net_arch: vec![256, 256],
+        }
+    }
+}
+
+/// Reused buffers of one batch's passes.
+#[derive(Default)]
+pub struct PixelCache {
+    /// Each camera's images of the batch, gathered contiguously.
+    views: Vec<Vec<u8>>,
+    encoders: Vec<CnnCache>,
+    /// The head's input, then each layer's output (after ReLU for hidden layers).
+    head: Vec<Vec<f32>>,
+    d_head: Vec<f32>,
+    d_next: Vec<f32>,
+    batch: usize,
+}
+
+/// The pixel policy: encoders, standardisation of the state and the head (see the module).
+pub struct PixelActor {
+    config: PixelActorConfig,
+    images: ImageSpace,
+    encoders: Vec<CnnEncoder>,
+    state_dim: usize,
+    act_dim: usize,
+    /// `(in, out)` of each head layer.
+    head: Vec<(usize, usize)>,
+    varmap: VarMap,
+    /// Parameter names in pass order: each encoder's, then the head's.
+    names: Vec<String>,
+    /// The state's standardisation (mean, standard deviation), fixed once set.
+    state_mean: Vec<f32>,
+    state_std: Vec<f32>,
+}
+
+impl PixelActor {
+    /// A pixel actor for observations of `state_dim` values and `images`, giving `act_dim`
+    /// values, its weights drawn from `rng` (He-uniform; the output layer scaled by 0.01).
+    pub fn new(
+        config: &PixelActorConfig,
+        images: &ImageSpace,
+        state_dim: usize,
+        act_dim: usize,
+        rng: &mut dyn RngCore,
+    ) -> Result<Self, String> {
+        if images.views.is_empty() {
+            return Err(
+                "a pixel actor needs camera images (camera.mode = \"rgb+state\", …)".into(),
+            );
+        }
+        let encoders = (images.views.iter())
+            .map(|v| CnnEncoder::new(config.encoder, v, config.features))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut widths = vec![encoders.len() * config.features + state_dim];
+        widths.extend(&config.net_arch);
+        widths.push(act_dim);
+        let head: Vec<(usize, usize)> = widths.windows(2).map(|w| (w[0], w[1])).collect();
+        let mut shapes = Vec::new();
+        for (v, e) in encoders.iter().enumerate() {
+            for (name, shape) in e.param_shapes() {
+                shapes.push((format!("enc{v}.{name}"), shape));
+            }
+        }
+        for (l, &(inp, out)) in head.iter().enumerate() {
+            shapes.push((format!("head.{l}.weight"), vec![out, inp]));
+            shapes.push((format!("head.{l}.bias"), vec![out]));
+        }
+        let varmap = VarMap::new();
+        let last = shapes.len() - 2;
+        for (i, (name, shape)) in shapes.iter().enumerate() {
+            let n: usize = shape.iter().product();
+            let values: Vec<f32> = if name.ends_with("bias") {
+                vec![0.0; n]
+            } else {
+                let fan_in: usize = shape[1..].iter().product();
+                let scale = if i == last { 0.01 } else { 1.0 };
+                let bound = scale * (6.0 / fan_in as f32).sqrt();
+                (0..n).map(|_| rng.random_range(-bound..bound)).collect()
+            };
+            let var = varmap
+                .get(
+                    shape.clone(),
+                    name,
+                    Init::Const(0.0),
+                    DType::F32,
+                    &Device::Cpu,
+                )
+                .map_err(|e| e.to_string())?;
+            let tensor = Tensor::from_vec(values, shape.clone(), &Device::Cpu);
+            let data = varmap.data().lock().expect("varmap lock");
+            data[name]
+                .set(&tensor.map_err(|e| e.to_string())?)
+                .map_err(|e| e.to_string())?;
+            drop(data);
+            let _ = var;
+        }
+        Ok(Self {
+            config: config.clone(),
+            images: images.clone(),
+            encoders,
+            state_dim,
+            act_dim,
+            head,
+            varmap,
+            names: shapes.into_iter().map(|(n, _)| n).collect(),
+            state_mean: vec![0.0; state_dim],
+            state_std: vec![1.0; state_dim],
+        })
+    }
+
+    /// Its shape.
+    pub fn config(&self) -> &PixelActorConfig {
+        &self.config
+    }
+
+    /// The images it reads.
+    pub fn images(&self) -> &ImageSpace {
+        &self.images
+    }
+
+    /// State values it reads.
+    pub fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    /// Values of an action.
+    pub fn act_dim(&self) -> usize {
+        self.act_dim
+    }
+
+    /// The weights.
+    pub fn varmap(&self) -> &VarMap {
+        &self.varmap
+    }
+
+    /// Number of trained values.
+    pub fn parameter_count(&self) -> usize {
+        let data = self.varmap.data().lock().expect("varmap lock");
+        data.values().map(|v| v.elem_count()).sum()
+    }
+
+    /// Sets the state's standardisation from `states` (`rows × state_dim`): per value its mean
+    /// and standard deviation (at least 1e-3, so that constant values stay finite).
+    pub fn fit_state_scale(&mut self, states: &[f32]) {
+        let rows = states.len() / self.state_dim.max(1);
+        if rows == 0 {
+            return;
+        }
+        for j in 0..self.state_dim {
+            let column = states.iter().skip(j).step_by(self.state_dim);
+            let mean = column.clone().map(|&v| v as f64).sum::<f64>() / rows as f64;
+            let var = column.map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / rows as f64;
+            self.state_mean[j] = mean as f32;
+            self.state_std[j] = (var.sqrt() as f32).max(1e-3);
+        }
+    }
+
+    /// The standardisation `(mean, std)` of the state.
+    pub fn state_scale(&self) -> (&[f32], &[f32]) {
+        (&self.state_mean, &self.state_std)
+    }
+
+    /// The tensors in pass order.
+    fn tensors(&self) -> Vec<Tensor> {
+        let data = self.varmap.data().lock().expect("varmap lock");
+        (self.names.iter())
+            .map(|n| data[n].as_tensor().clone())
+            .collect()
+    }
+
+    /// Actions for `batch` observations: `states` (`batch × state_dim`) and `images` (`batch ×
+    /// image_len` bytes, each observation's cameras one after another). `batch × act_dim`
+    /// values, in `cache`'s last head buffer.
+    pub fn forward(
+        &self,
+        states: &[f32],
+        images: &[u8],
+        batch: usize,
+        cache: &mut PixelCache,
+    ) -> candle_core::Result<Vec<f32>> {
+        let tensors = self.tensors();
+        let values = VarValues::new(tensors.iter());
+        let params: Vec<&[f32]> = (0..tensors.len())
+            .map(|i| values.get(i))
+            .collect::<candle_core::Result<_>>()?;
+        self.forward_with(&params, states, images, batch, cache);
+        Ok(cache.head.last().cloned().unwrap_or_default())
+    }
+
+    fn forward_with(
+        &self,
+        params: &[&[f32]],
+        states: &[f32],
+        images: &[u8],
+        batch: usize,
+        cache: &mut PixelCache,
+    ) {
+        let per_obs = self.images.len();
+        let n_views = self.encoders.len();
+        cache.batch = batch;
+        cache.views.resize_with(n_views, Vec::new);
+        cache.encoders.resize_with(n_views, CnnCache::default);
+        let mut offset = 0;
+        for (v, encoder) in self.encoders.iter().enumerate() {
+            let range = self.images.range(v);
+            let gathered = &mut cache.views[v];
+            gathered.clear();
+            for obs in images.chunks_exact(per_obs).take(batch) {
+                gathered.extend_from_slice(&obs[range.clone()]);
+            }
+            let count = encoder.param_shapes().len();
+            let own = &params[offset..offset + count];
+            encoder.forward(own, gathered, batch, &mut cache.encoders[v]);
+            offset += count;
+        }
+        let layers = self.head.len();
+        cache.head.resize_with(layers + 1, Vec::new);
+        let input = &mut cache.head[0];
+        input.clear();
+        let features = self.config.features;
+        for b in 0..batch {
+            for enc in &cache.encoders {
+                input.extend_from_slice(&enc.features()[b * features..(b + 1) * features]);
+            }
+            let state = &states[b * self.state_dim..(b + 1) * self.state_dim];
+            let scale = self.state_mean.iter().zip(&self.state_std);
+            input.extend(state.iter().zip(scale).map(|(x, (m, s))| (x - m) / s));
+        }
+        for (l, &(inp, out)) in self.head.iter().enumerate() {
+            let (before, after) = cache.head.split_at_mut(l + 1);
+            let y = &mut after[0];
+            y.resize(batch * out, 0.0);
+            let (w, b) = (params[offset + 2 * l], params[offset + 2 * l + 1]);
+            linear_forward((inp, out), &before[l], w, b, y);
+            if l + 1 < layers {
+                relu(y);
+            }
+        }
+    }
+
+    /// One Adam step on the mean squared error between the actions for the batch and
+    /// `targets` (`batch × act_dim`); `adam` must be built on [`Self::varmap`]. Returns the loss
+    /// before the step.
+    pub fn train_step(
+        &self,
+        adam: &mut Adam,
+        states: &[f32],
+        images: &[u8],
+        targets: &[f32],
+        cache: &mut PixelCache,
+    ) -> candle_core::Result<f32> {
+        let batch = targets.len() / self.act_dim;
+        let tensors = self.tensors();
+        let mut grads: Vec<Vec<f32>> = tensors.iter().map(|t| vec![0.0; t.elem_count()]).collect();
+        let loss;
+        {
+            let values = VarValues::new(tensors.iter());
+            let params: Vec<&[f32]> = (0..tensors.len())
+                .map(|i| values.get(i))
+                .collect::<candle_core::Result<_>>()?;
+            self.forward_with(&params, states, images, batch, cache);
+            loss = self.backward(&params, targets, cache, &mut grads);
+        }
+        // Adam takes the gradients in its own (name-sorted) order.
+        let order: Vec<usize> = adam
+            .vars()
+            .map(|(name, _)| self.names.iter().position(|n| n == name))
+            .collect::<Option<_>>()
+            .ok_or_else(|| candle_core::Error::Msg("adam is not over this actor".into()))?;
+        let sorted: Vec<Option<&[f32]>> =
+            order.iter().map(|&i| Some(grads[i].as_slice())).collect();
+        adam.step_with(&sorted, 10.0)?;
+        Ok(loss)
+    }
+
+    /// The loss's gradients into `grads` (pass order); returns the loss.
+    fn backward(
+        &self,
+        params: &[&[f32]],
+        targets: &[f32],
+        cache: &mut PixelCache,
+        grads: &mut [Vec<f32>],
+    ) -> f32 {
+        let batch = cache.batch;
+        let out = cache.head.last().expect("forward ran");
+        let n = (batch * self.act_dim) as f32;
+        let mut loss = 0.0f64;
+        cache.d_head.clear();
+        for (y, t) in out.iter().zip(targets) {
+            let e = y - t;
+            loss += (e * e) as f64;
+            cache.d_head.push(2.0 * e / n);
+        }
+        let offset: usize = self.encoders.iter().map(|e| e.param_shapes().len()).sum();
+        for (l, &(inp, out)) in self.head.iter().enumerate().rev() {
+            if l + 1 < self.head.len() {
+                relu_backward(&cache.head[l + 1], &mut cache.d_head);
+            }
+            cache.d_next.resize(batch * inp, 0.0);
+            let (a, b) = grads[offset + 2 * l..].split_at_mut(1);
+            linear_backward(
+                (inp, out),
+                &cache.head[l],
+                params[offset + 2 * l],
+                &cache.d_head,
+                &mut a[0],
+                &mut b[0],
+                Some(&mut cache.d_next),
+            );
+            std::mem::swap(&mut cache.d_head, &mut cache.d_next);
+        }
+        // `d_head` now holds the head input's gradient: each camera's features, then the state.
+        let features = self.config.features;
+        let width = self.head[0].0;
+        let mut start = 0;
+        for (v, encoder) in self.encoders.iter().enumerate() {
+            let count = encoder.param_shapes().len();
+            let mut d_features: Vec<f32> = (0..batch)
+                .flat_map(|b| {
+                    let row = b * width + v * features;
+                    cache.d_head[row..row + features].iter().copied()
+                })
+                .collect();
+            let own = &params[start..start + count];
+            encoder.backward(
+                own,
+                &mut cache.encoders[v],
+                &mut d_features,
+                &mut grads[start..start + count],
+            );
+            start += count;
+        }
+        (loss / n as f64) as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fairgrasp_env::spaces::ImageView;
+    use rand::SeedableRng;
+
+    fn space() -> ImageSpace {
+        ImageSpace {
+            views: vec![
+                ImageView {
+                    name: "scene_rgb".into(),
+                    height: 32,
+                    width: 32,
+                    channels: 3,
+                },
+                ImageView {
+                    name: "wrist_depth".into(),
+                    height: 32,
+                    width: 32,
+                    channels: 1,
+                },
+            ],
+        }
+    }
+
+    /// A bright square at a random place in the scene image; the target is its position: the
+    /// actor must read where things are from pixels.
+    fn batch(rng: &mut impl Rng, n: usize) -> (Vec<f32>, Vec<u8>, Vec<f32>) {
+        let space = space();
+        let (mut states, mut images, mut targets) = (Vec::new(), Vec::new(), Vec::new());
+        for _ in 0..n {
+            let (x, y) = (rng.random_range(4..24usize), rng.random_range(4..24usize));
+            let mut image = vec![20u8; space.len()];
+            for r in y..y + 4 {
+                for c in x..x + 4 {
+                    image[(r * 32 + c) * 3..(r * 32 + c) * 3 + 3].fill(230);
+                }
+            }
+            images.extend(image);
+            states.extend([rng.random::<f32>(), 1.0]);
+            targets.extend([x as f32 / 10.0 - 1.4, y as f32 / 10.0 - 1.4]);
+        }
+        (states, images, targets)
+    }
+
+    #[test]
+    fn it_learns_where_a_square_is_from_pixels() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let config = PixelActorConfig {
+            encoder: CnnArch::FastCnn,
+            features: 16,
+            net_arch: vec![32],
+        };
+        let mut actor = PixelActor::new(&config, &space(), 2, 2, &mut rng).unwrap();
+        assert_eq!(actor.images().views.len(), 2);
+        let (states, _, _) = batch(&mut rng, 256);
+        actor.fit_state_scale(&states);
+        assert!(
+            (actor.state_scale().1[1] - 1e-3).abs() < 1e-9,
+            "a constant value"
+        );
+        let mut adam = Adam::new(actor.varmap(), 3e-3).unwrap();
+        let mut cache = PixelCache::default();
+        let (test_states, test_images, test_targets) = batch(&mut rng, 64);
+        let mse = |actor: &PixelActor, cache: &mut PixelCache| {
+            let out = actor
+                .forward(&test_states, &test_images, 64, cache)
+                .unwrap();
+            out.iter()
+                .zip(&test_targets)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f32>()
+                / out.len() as f32
+        };
+        let before = mse(&actor, &mut cache);
+        for _ in 0..800 {
+            let (s, i, t) = batch(&mut rng, 32);
+            let loss = actor.train_step(&mut adam, &s, &i, &t, &mut cache).unwrap();
+            assert!(loss.is_finite());
+        }
+        let after = mse(&actor, &mut cache);
+        assert!(
+            after < 0.1 * before && after < 0.02,
+            "mse {before} → {after}"
+        );
+    }
+
+    #[test]
+    fn the_gradients_match_finite_differences() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let config = PixelActorConfig {
+            encoder: CnnArch::FastCnn,
+            features: 4,
+            net_arch: vec![6],
+        };
+        let mut actor = PixelActor::new(&config, &space(), 2, 2, &mut rng).unwrap();
+        let (states, _, targets) = batch(&mut rng, 3);
+        // Noise, not the flat background of `batch`: on a flat image every patch has the same
+        // pre-activation, and a finite difference would step across ReLU's kink for all of them.
+        let images: Vec<u8> = (0..3 * space().len()).map(|_| rng.random()).collect();
+        actor.fit_state_scale(&states);
+        let tensors = actor.tensors();
+        let mut params: Vec<Vec<f32>> = (tensors.iter())
+            .map(|t| t.flatten_all().unwrap().to_vec1::<f32>().unwrap())
+            .collect();
+        // Larger output weights than the initial 0.01 scale, so every path carries gradient.
+        let last = params.len() - 2;
+        for (i, w) in params[last].iter_mut().enumerate() {
+            *w = 0.3 * ((i % 5) as f32 - 2.0);
+        }
+        let mut cache = PixelCache::default();
+        let loss = |params: &[Vec<f32>], cache: &mut PixelCache| {
+            let refs: Vec<&[f32]> = params.iter().map(Vec::as_slice).collect();
+            actor.forward_with(&refs, &states, &images, 3, cache);
+            let out = cache.head.last().unwrap();
+            out.iter()
+                .zip(&targets)
+                .map(|(y, t)| (y - t) * (y - t))
+                .sum::<f32>()
+                / out.len() as f32
+        };
+        let refs: Vec<&[f32]> = params.iter().map(Vec::as_slice).collect();
+        actor.forward_with(&refs, &states, &images, 3, &mut cache);
+        let mut grads: Vec<Vec<f32>> = params.iter().map(|p| vec![0.0; p.len()]).collect();
+        actor.backward(&refs, &targets, &mut cache, &mut grads);
+        let eps = 2e-3;
+        for p in 0..params.len() {
+            for i in (0..params[p].len()).step_by(params[p].len() / 4 + 1) {
+                let orig = params[p][i];
+                params[p][i] = orig + eps;
+                let up = loss(&params, &mut cache);
+                params[p][i] = orig - eps;
+                let down = loss(&params, &mut cache);
+                params[p][i] = orig;
+                let numeric = (up - down) / (2.0 * eps);
+                assert!(
+                    (numeric - grads[p][i]).abs() <= 2e-2 * (1.0 + numeric.abs()) + 1e-4,
+                    "{}[{i}]: numeric {numeric}, analytic {}",
+                    actor.names[p],
+                    grads[p][i]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_same_seed_draws_the_same_weights() {
+        let weights = |seed| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let actor =
+                PixelActor::new(&PixelActorConfig::default(), &space(), 5, 3, &mut rng).unwrap();
+            actor
+                .tensors()
+                .iter()
+                .map(|t| t.flatten_all().unwrap().to_vec1::<f32>().unwrap())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(weights(1), weights(1));
+        assert_ne!(weights(1), weights(2));
+    }
+}
