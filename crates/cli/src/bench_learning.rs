@@ -208,15 +208,7 @@ fn markdown(results: &[RunResult], args: &LearningBenchArgs, plot: &Path) -> Str
     let cores = std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1);
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split(':').nth(1))
-                .map(|m| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into());
+    let cpu = crate::host::cpu_model();
     let _ = writeln!(s, "## Learning: success rate against steps and wall time\n");
     let command: Vec<String> = std::env::args().skip(1).collect();
     let _ = writeln!(

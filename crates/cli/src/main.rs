@@ -7,10 +7,12 @@ mod bench_sac;
 mod commission_cmd;
 mod demo;
 mod deploy_cmd;
+mod distill_cmd;
 mod env_cmd;
 mod eval_cmd;
 mod eval_deployment;
 mod export_cmd;
+mod host;
 mod inspect;
 mod plot_cmd;
 mod record_cmd;
@@ -45,6 +47,9 @@ enum Command {
     Train(train_cmd::TrainArgs),
     /// Evaluate a saved model on held-out episodes (success rate, mean return and length).
     Eval(eval_cmd::EvalArgs),
+    /// Teach a camera policy from a trained state policy (teacher–student distillation, DAgger)
+    /// and evaluate it alone on held-out episodes.
+    Distill(distill_cmd::DistillArgs),
     /// Plot runs' learning curves (success rate and return against env steps and wall time)
     /// from their progress.csv into one PNG or SVG.
     Plot(plot_cmd::PlotArgs),
@@ -98,6 +103,7 @@ fn main() -> std::process::ExitCode {
         Command::Inspect(args) => inspect::run(&args),
         Command::Demo(command) => demo::run(command),
         Command::Train(args) => train_cmd::run(&args),
+        Command::Distill(args) => distill_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Plot(args) => plot_cmd::run(&args),
         Command::Record(args) => record_cmd::run(&args),

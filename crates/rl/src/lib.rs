@@ -17,6 +17,7 @@ pub mod algo;
 pub mod algorithm;
 pub mod buffers;
 pub mod configs;
+pub mod distill;
 pub mod distributions;
 pub mod error;
 pub mod evaluation;
