@@ -371,3 +371,47 @@ fn camera_settings_parse_and_bad_ones_name_the_key() {
     let config = parse(&["camera.mode=\"rgb+state\"", "camera.wrist.enabled=true"]).unwrap();
     assert!(config.camera.wrist.enabled);
 }
+
+#[test]
+fn visual_randomisation_changes_the_look_per_episode_not_the_physics() {
+    let env = |randomize: bool| {
+        camera_env(|c| {
+            c.camera.mode = ObsMode::RgbState;
+            c.camera.randomize.enabled = randomize;
+        })
+    };
+    let (mut plain, mut varied) = (env(false), env(true));
+    let (plain_obs, _) = plain.reset(Some(5)).unwrap();
+    let (varied_obs, _) = varied.reset(Some(5)).unwrap();
+    assert_eq!(
+        plain_obs, varied_obs,
+        "the look draws after the episode's physics"
+    );
+    let first = varied.image().unwrap().to_vec();
+    assert_ne!(plain.image().unwrap(), &first[..]);
+    varied.reset(Some(6)).unwrap();
+    assert_ne!(
+        varied.image().unwrap(),
+        &first[..],
+        "each episode its own look"
+    );
+    varied.reset(Some(5)).unwrap();
+    assert_eq!(
+        varied.image().unwrap(),
+        &first[..],
+        "the same seed, the same look"
+    );
+    // Steps keep the episode's look but draw fresh pixel noise: the images of two steps
+    // differ even where nothing moved (the background's corner).
+    let action = vec![0.0; varied.action_space().dim()];
+    varied.step(&action).unwrap();
+    let a = varied.image().unwrap()[..30].to_vec();
+    varied.step(&action).unwrap();
+    assert_ne!(&varied.image().unwrap()[..30], &a[..]);
+
+    let bad = GraspConfig::from_toml_str("", &["camera.randomize.brightness=[0.0, 1.0]".into()]);
+    match bad {
+        Err(EnvError::Config { key, .. }) => assert_eq!(key, "camera.randomize.brightness"),
+        other => panic!("expected a config error, got {other:?}"),
+    }
+}

@@ -35,5 +35,5 @@ pub mod video;
 
 pub use camera::{Camera, CameraConfig};
 pub use error::{RenderError, Result};
-pub use renderer::{Renderer, segment_name};
+pub use renderer::{Look, Renderer, segment_name};
 pub use segment::Segment;

@@ -12,6 +12,37 @@ use fairgrasp_sim::scene::Scene;
 /// sRGB of pixels that show nothing (a pale grey-blue wall).
 pub const BACKGROUND_RGB: [u8; 3] = [205, 214, 224];
 
+/// How a frame is lit and coloured beyond the scene's own colours: what visual domain
+/// randomisation varies. The default draws the scene as designed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Look {
+    /// World direction toward the light; `None`: above and behind the camera.
+    pub light: Option<[f32; 3]>,
+    /// Scales every lit colour.
+    pub brightness: f32,
+    /// sRGB of pixels that show nothing.
+    pub background: [u8; 3],
+    /// Multiplies the table's linear colour, channel by channel.
+    pub table_tint: [f32; 3],
+    /// Multiplies the objects' and bins' linear colours.
+    pub object_tint: [f32; 3],
+    /// Multiplies the robot's linear colours.
+    pub robot_tint: [f32; 3],
+}
+
+impl Default for Look {
+    fn default() -> Self {
+        Self {
+            light: None,
+            brightness: 1.0,
+            background: BACKGROUND_RGB,
+            table_tint: [1.0; 3],
+            object_tint: [1.0; 3],
+            robot_tint: [1.0; 3],
+        }
+    }
+}
+
 /// Renders one scene from one camera. Built for a scene ([`Renderer::new`]): it keeps that
 /// scene's robot meshes, so render scenes with the same robot description only.
 pub struct Renderer {
@@ -19,6 +50,7 @@ pub struct Renderer {
     meshes: SceneMeshes,
     raster: Raster,
     depth: Vec<f32>,
+    look: Look,
 }
 
 impl Renderer {
@@ -28,6 +60,7 @@ impl Renderer {
             meshes: SceneMeshes::new(scene)?,
             raster: Raster::new(camera.width(), camera.height()),
             depth: Vec::new(),
+            look: Look::default(),
             camera,
         })
     }
@@ -42,6 +75,16 @@ impl Renderer {
         &self.camera
     }
 
+    /// How frames are lit and coloured from now on.
+    pub fn set_look(&mut self, look: Look) {
+        self.look = look;
+    }
+
+    /// How frames are lit and coloured.
+    pub fn look(&self) -> &Look {
+        &self.look
+    }
+
     /// Changes the camera (the buffers follow its size).
     pub fn set_camera(&mut self, camera: Camera) {
         if (camera.width(), camera.height()) != (self.camera.width(), self.camera.height()) {
@@ -53,20 +96,33 @@ impl Renderer {
     /// Draws the scene's current state; read the images with [`Self::rgb`], [`Self::depth`]
     /// and [`Self::segmentation`].
     pub fn render(&mut self, scene: &Scene) -> Result<()> {
-        self.raster.clear(BACKGROUND_RGB);
-        // Light from above and behind the camera, so faces toward the viewer are lit.
-        let c = self.camera.config();
-        let back = (Vector::from(c.eye) - Vector::from(c.target)).normalize();
-        let light_world = (back + Vector::new(0.0, 0.0, 1.5)).normalize();
+        let look = &self.look;
+        self.raster.clear(look.background);
+        let light_world = match look.light {
+            Some(toward) => Vector::from(toward).normalize(),
+            // Light from above and behind the camera, so faces toward the viewer are lit.
+            None => {
+                let c = self.camera.config();
+                let back = (Vector::from(c.eye) - Vector::from(c.target)).normalize();
+                (back + Vector::new(0.0, 0.0, 1.5)).normalize()
+            }
+        };
         // The rasteriser wants the direction toward the light in the camera frame.
         let light = self.camera.direction_to_camera(light_world);
         for placed in self.meshes.placed(scene)? {
+            let tint = match Segment::from_id(placed.id) {
+                Segment::Table => look.table_tint,
+                Segment::Object(_) | Segment::Bin(_) => look.object_tint,
+                Segment::Link(_) => look.robot_tint,
+                Segment::Background => [1.0; 3],
+            };
+            let colour = std::array::from_fn(|i| placed.colour[i] * tint[i] * look.brightness);
             self.raster.draw_mesh(
                 &self.camera,
                 light,
                 &placed.pose,
                 placed.mesh,
-                placed.colour,
+                colour,
                 placed.id,
             );
         }

@@ -5,11 +5,15 @@
 //! the previous action), never the object's pose; the task's full observation of the true state
 //! goes to [`crate::core::Info::privileged`] for a critic that sees it (asymmetric actor-critic).
 
+use crate::config::check_range;
 use crate::error::{EnvError, Result};
+use crate::random::uniform;
 use crate::spaces::{ImageSpace, ImageView};
-use fairgrasp_render::{Camera, CameraConfig, RenderError, Renderer};
+use fairgrasp_render::{Camera, CameraConfig, Look, RenderError, Renderer};
 use fairgrasp_sim::rapier3d::na::{Isometry3, Point3, Vector3};
 use fairgrasp_sim::scene::Scene;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -151,6 +155,88 @@ impl Default for WristCameraConfig {
     }
 }
 
+/// `[camera.randomize]`: visual domain randomisation, drawn per episode (the noise per frame).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VisualRandomization {
+    /// Whether anything is drawn (off: every episode looks as designed).
+    pub enabled: bool,
+    /// Direction toward the light around the vertical (degrees; 0 = +x).
+    pub light_azimuth_deg: [f32; 2],
+    /// The light's height above the horizon (degrees).
+    pub light_elevation_deg: [f32; 2],
+    /// Scale of every lit colour.
+    pub brightness: [f32; 2],
+    /// Per-channel scale of the table's, the objects' and the robot's colours (each drawn
+    /// apart).
+    pub tint: [f32; 2],
+    /// Per-channel scale of the background's colour.
+    pub background: [f32; 2],
+    /// Each camera's position moves by up to this much along each axis (m).
+    pub position_jitter: f32,
+    /// Each camera's view direction turns by up to this angle (degrees).
+    pub angle_jitter_deg: f32,
+    /// Each camera's field of view changes by up to this much (degrees).
+    pub fov_jitter_deg: f32,
+    /// Standard deviation of each pixel's noise (levels of 255), uniform, drawn every frame.
+    pub pixel_noise: f32,
+}
+
+impl Default for VisualRandomization {
+    /// The ranges the issue names for the camera (±2 cm, ±3°) and lighting and colour changes
+    /// a lab sees over a day.
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            light_azimuth_deg: [-180.0, 180.0],
+            light_elevation_deg: [35.0, 85.0],
+            brightness: [0.75, 1.25],
+            tint: [0.8, 1.2],
+            background: [0.8, 1.1],
+            position_jitter: 0.02,
+            angle_jitter_deg: 3.0,
+            fov_jitter_deg: 3.0,
+            pixel_noise: 3.0,
+        }
+    }
+}
+
+impl VisualRandomization {
+    fn validate(&self) -> Result<()> {
+        let key = |k: &str| format!("camera.randomize.{k}");
+        check_range(
+            &key("light_azimuth_deg"),
+            self.light_azimuth_deg,
+            -360.0,
+            360.0,
+        )?;
+        check_range(
+            &key("light_elevation_deg"),
+            self.light_elevation_deg,
+            0.0,
+            90.0,
+        )?;
+        check_range(&key("brightness"), self.brightness, 0.05, 5.0)?;
+        check_range(&key("tint"), self.tint, 0.0, 5.0)?;
+        check_range(&key("background"), self.background, 0.0, 2.0)?;
+        let limits = [
+            ("position_jitter", self.position_jitter, 0.5),
+            ("angle_jitter_deg", self.angle_jitter_deg, 45.0),
+            ("fov_jitter_deg", self.fov_jitter_deg, 45.0),
+            ("pixel_noise", self.pixel_noise, 100.0),
+        ];
+        for (name, value, max) in limits {
+            if !(value.is_finite() && (0.0..=max).contains(&value)) {
+                return Err(EnvError::config(
+                    key(name),
+                    format!("must be 0 to {max}, got {value}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The `[camera]` section: observation mode and the cameras behind it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -169,6 +255,8 @@ pub struct CameraObsConfig {
     pub scene: SceneCameraConfig,
     /// The wrist camera.
     pub wrist: WristCameraConfig,
+    /// Visual domain randomisation.
+    pub randomize: VisualRandomization,
 }
 
 impl Default for CameraObsConfig {
@@ -181,6 +269,7 @@ impl Default for CameraObsConfig {
             far: 2.5,
             scene: SceneCameraConfig::default(),
             wrist: WristCameraConfig::default(),
+            randomize: VisualRandomization::default(),
         }
     }
 }
@@ -246,7 +335,7 @@ impl CameraObsConfig {
         }
         Camera::new(self.wrist_camera(&Isometry3::identity()))
             .map_err(|e| camera_key("wrist", e))?;
-        Ok(())
+        self.randomize.validate()
     }
 
     fn scene_camera(&self) -> CameraConfig {
@@ -266,16 +355,23 @@ impl CameraObsConfig {
     /// The wrist camera when the TCP is at `tcp`: at the offset, looking along the tool's z,
     /// with the tool's x up in the image.
     fn wrist_camera(&self, tcp: &Isometry3<f64>) -> CameraConfig {
-        let [x, y, z] = self.wrist.offset.map(f64::from);
+        self.wrist_camera_at(tcp, &Jitter::default())
+    }
+
+    /// [`Self::wrist_camera`] with its mounting moved by `jitter`.
+    fn wrist_camera_at(&self, tcp: &Isometry3<f64>, jitter: &Jitter) -> CameraConfig {
+        let offset: [f32; 3] = std::array::from_fn(|i| self.wrist.offset[i] + jitter.position[i]);
+        let [x, y, z] = offset.map(f64::from);
         let eye = tcp * Point3::new(x, y, z);
-        let target = eye + tcp.rotation * Vector3::z();
+        let [tx, ty, tz] = jitter.turn.map(f64::from);
+        let target = eye + tcp.rotation * (Vector3::z() + Vector3::new(tx, ty, tz));
         let up = tcp.rotation * Vector3::x();
         let f = |v: [f64; 3]| v.map(|c| c as f32);
         CameraConfig {
             eye: f([eye.x, eye.y, eye.z]),
             target: f([target.x, target.y, target.z]),
             up: f([up.x, up.y, up.z]),
-            fov_deg: self.wrist.fov_deg,
+            fov_deg: self.wrist.fov_deg + jitter.fov_deg,
             width: self.width,
             height: self.height,
             near: self.near,
@@ -291,12 +387,25 @@ enum Mount {
     Wrist,
 }
 
+/// One episode's change to a camera (visual domain randomisation).
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Jitter {
+    /// Added to the position (m; for the wrist camera, in the TCP frame).
+    position: [f32; 3],
+    /// Added to the unit view direction (turns it by about its length, in radians).
+    turn: [f32; 3],
+    /// Added to the field of view (degrees).
+    fov_deg: f32,
+}
+
 /// The cameras of a pixel observation and the buffer their images are drawn into.
 pub struct Cameras {
     config: CameraObsConfig,
-    views: Vec<(Mount, Renderer)>,
+    views: Vec<(Mount, Renderer, Jitter)>,
     space: ImageSpace,
     image: Vec<u8>,
+    /// The stream of the visual randomisation (reseeded at every episode's start).
+    rng: ChaCha8Rng,
 }
 
 impl Cameras {
@@ -320,7 +429,7 @@ impl Cameras {
                 Mount::Wrist => config.wrist_camera(&scene.tcp_pose()),
             };
             let camera = Camera::new(camera).map_err(|e| camera_key(name, e))?;
-            views.push((mount, Renderer::new(scene, camera)?));
+            views.push((mount, Renderer::new(scene, camera)?, Jitter::default()));
             space.views.push(ImageView {
                 name: format!("{name}_{}", config.mode.image_kind()),
                 height: config.height,
@@ -333,6 +442,7 @@ impl Cameras {
             config: config.clone(),
             views,
             space,
+            rng: ChaCha8Rng::seed_from_u64(0),
         }))
     }
 
@@ -346,14 +456,79 @@ impl Cameras {
         &self.image
     }
 
+    /// Whether visual domain randomisation draws anything (then [`Self::start_episode`] wants
+    /// a seed from the environment's stream).
+    pub fn randomized(&self) -> bool {
+        self.config.randomize.enabled
+    }
+
+    /// Draws the episode's look and camera changes from a stream seeded `seed` (nothing without
+    /// `camera.randomize.enabled`).
+    pub fn start_episode(&mut self, seed: u64) -> Result<()> {
+        let r = self.config.randomize.clone();
+        if !r.enabled {
+            return Ok(());
+        }
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        let rng = &mut self.rng;
+        let azimuth = uniform(rng, r.light_azimuth_deg).to_radians();
+        let elevation = uniform(rng, r.light_elevation_deg).to_radians();
+        let light = [
+            elevation.cos() * azimuth.cos(),
+            elevation.cos() * azimuth.sin(),
+            elevation.sin(),
+        ];
+        let brightness = uniform(rng, r.brightness);
+        let mut tint = || -> [f32; 3] { std::array::from_fn(|_| uniform(rng, r.tint)) };
+        let (table_tint, object_tint, robot_tint) = (tint(), tint(), tint());
+        let background = std::array::from_fn(|i| {
+            let scale = uniform(rng, r.background);
+            (fairgrasp_render::renderer::BACKGROUND_RGB[i] as f32 * scale).clamp(0.0, 255.0) as u8
+        });
+        let look = Look {
+            light: Some(light),
+            brightness,
+            background,
+            table_tint,
+            object_tint,
+            robot_tint,
+        };
+        let turn = r.angle_jitter_deg.to_radians();
+        for (mount, renderer, jitter) in &mut self.views {
+            *jitter = Jitter {
+                position: std::array::from_fn(|_| {
+                    uniform(rng, [-r.position_jitter, r.position_jitter])
+                }),
+                turn: std::array::from_fn(|_| uniform(rng, [-turn, turn])),
+                fov_deg: uniform(rng, [-r.fov_jitter_deg, r.fov_jitter_deg]),
+            };
+            renderer.set_look(look.clone());
+            if *mount == Mount::Scene {
+                let mut camera = self.config.scene_camera();
+                let distance = (0..3)
+                    .map(|i| (camera.target[i] - camera.eye[i]).powi(2))
+                    .sum::<f32>()
+                    .sqrt();
+                for i in 0..3 {
+                    camera.eye[i] += jitter.position[i];
+                    camera.target[i] += jitter.position[i] + jitter.turn[i] * distance;
+                }
+                camera.fov_deg += jitter.fov_deg;
+                let camera = Camera::new(camera).map_err(|e| camera_key("scene", e))?;
+                renderer.set_camera(camera);
+            }
+        }
+        Ok(())
+    }
+
     /// Draws every view of the scene as it is now.
     pub fn capture(&mut self, scene: &Scene) -> Result<()> {
         let mode = self.config.mode;
         let (near, far) = (self.config.near, self.config.far);
         let mut start = 0;
-        for (i, (mount, renderer)) in self.views.iter_mut().enumerate() {
+        for (i, (mount, renderer, jitter)) in self.views.iter_mut().enumerate() {
             if *mount == Mount::Wrist {
-                let camera = Camera::new(self.config.wrist_camera(&scene.tcp_pose()))
+                let camera = Camera::new(self.config.wrist_camera_at(&scene.tcp_pose(), jitter))
                     .map_err(|e| camera_key("wrist", e))?;
                 renderer.set_camera(camera);
             }
@@ -380,6 +555,15 @@ impl Cameras {
                         o[3] = depth_byte(*d);
                     }
                 }
+            }
+        }
+        let noise = self.config.randomize.pixel_noise;
+        if self.config.randomize.enabled && noise > 0.0 {
+            // Uniform on [-a, a] has standard deviation a / √3.
+            let a = noise * 3f32.sqrt();
+            for v in &mut self.image {
+                let n: f32 = self.rng.random_range(-a..=a);
+                *v = (*v as f32 + n).round().clamp(0.0, 255.0) as u8;
             }
         }
         Ok(())

@@ -680,6 +680,10 @@ impl<T: Task> Env for ArmEnv<T> {
             observed,
             privileged: privileged.clone(),
         });
+        if let Some(cameras) = self.cameras.as_mut().filter(|c| c.randomized()) {
+            // Drawn last, so that the episode's other draws are those of an unrandomised look.
+            cameras.start_episode(self.rng.random())?;
+        }
         self.capture()?;
         Ok((
             obs,
