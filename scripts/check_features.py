@@ -18,10 +18,13 @@ import sys
 
 def resolved(*args):
     """{package with version: its features} as `cargo tree` resolves them for these arguments."""
-    out = subprocess.run(
+    done = subprocess.run(
         ["cargo", "tree", "--locked", "--prefix", "none", "--format", "{p}|{f}", *args],
-        check=True, capture_output=True, text=True,
-    ).stdout
+        capture_output=True, text=True,
+    )
+    if done.returncode != 0:
+        sys.exit(f"check_features: cargo tree {' '.join(args)} failed:\n{done.stderr}")
+    out = done.stdout
     seen = {}
     for line in out.splitlines():
         line = line.replace(" (*)", "").replace(" (proc-macro)", "").strip()

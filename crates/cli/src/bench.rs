@@ -27,6 +27,9 @@ pub enum BenchCommand {
     /// Frames per second of the CPU renderer (RGB, depth and segmentation together) at 84×84
     /// and 640×480, one thread, the default camera on a reset scene.
     Render(RenderBenchArgs),
+    /// The pixel policies' image encoders: forward and forward-plus-backward milliseconds per
+    /// batch, written-out kernels against candle's conv2d (bench/cnn adds PyTorch).
+    Cnn(crate::bench_cnn::CnnBenchArgs),
 }
 
 #[derive(clap::Args)]
@@ -75,6 +78,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Learning(args) => crate::bench_learning::run(&args),
         BenchCommand::Render(args) => render(&args),
         BenchCommand::Sac(args) => crate::bench_sac::run(&args),
+        BenchCommand::Cnn(args) => crate::bench_cnn::run(&args),
     }
 }
 

@@ -37,7 +37,48 @@ pub struct DistillArgs {
     /// Held-out episodes the student plays alone at the end.
     #[arg(long, default_value_t = 100)]
     pub eval_episodes: u32,
+    /// Also evaluate the student under visual conditions outside its training ranges
+    /// (dimmer, brighter and lower light, other colours, a camera moved more, more noise).
+    #[arg(long)]
+    pub held_out: bool,
 }
+
+/// Visual conditions the student never saw in training (`camera.randomize` moved outside the
+/// default ranges), each with the randomisation otherwise as in training.
+pub const HELD_OUT_CONDITIONS: &[(&str, &[&str])] = &[
+    (
+        "dim light (brightness 0.55-0.65)",
+        &["camera.randomize.brightness=[0.55, 0.65]"],
+    ),
+    (
+        "bright light (1.35-1.45)",
+        &["camera.randomize.brightness=[1.35, 1.45]"],
+    ),
+    (
+        "low light (elevation 15-25°)",
+        &["camera.randomize.light_elevation_deg=[15.0, 25.0]"],
+    ),
+    (
+        "pale colours (tint 1.25-1.35)",
+        &["camera.randomize.tint=[1.25, 1.35]"],
+    ),
+    (
+        "dark colours (tint 0.65-0.75)",
+        &["camera.randomize.tint=[0.65, 0.75]"],
+    ),
+    (
+        "camera moved more (3 cm, 4.5°, fov ±4.5°)",
+        &[
+            "camera.randomize.position_jitter=0.03",
+            "camera.randomize.angle_jitter_deg=4.5",
+            "camera.randomize.fov_jitter_deg=4.5",
+        ],
+    ),
+    (
+        "twice the pixel noise (6 levels)",
+        &["camera.randomize.pixel_noise=6.0"],
+    ),
+];
 
 pub fn run(args: &DistillArgs) -> Result<()> {
     let started = Instant::now();
@@ -109,5 +150,17 @@ pub fn run(args: &DistillArgs) -> Result<()> {
         student.parameter_count(),
         started.elapsed().as_secs_f64()
     );
+    if args.held_out {
+        for (name, overrides) in HELD_OUT_CONDITIONS {
+            let mut settings = env_overrides.clone();
+            settings.push("camera.randomize.enabled=true".into());
+            settings.extend(overrides.iter().map(|o| o.to_string()));
+            let table = teacher.env_settings(&settings)?;
+            let mut env = RescaleAction::new(registry::make(&env_id, &table)?)?;
+            let successes =
+                evaluate_student(&student, &mut env, args.eval_episodes, HELD_OUT_SEED_BASE)?;
+            println!("  {name}: {successes}/{}", args.eval_episodes);
+        }
+    }
     Ok(())
 }

@@ -2,6 +2,7 @@
 //! calls the library crates and prints.
 
 mod bench;
+mod bench_cnn;
 mod bench_learning;
 mod bench_sac;
 mod commission_cmd;

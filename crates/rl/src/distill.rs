@@ -13,6 +13,7 @@
 use crate::error::{Result, RlError};
 use crate::nn::adam::Adam;
 use crate::policies::pixel_actor::{PixelActor, PixelActorConfig, PixelCache};
+use fairgrasp_env::spaces::ImageView;
 use fairgrasp_env::{Env, VecEnv, VectorEnv};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -39,6 +40,9 @@ pub struct DistillConfig {
     pub learning_rate: f64,
     /// The most labelled states kept (the oldest are dropped first).
     pub max_samples: usize,
+    /// Random-shift augmentation (DrQ, Kostrikov et al. 2020): each training image moves by up
+    /// to this many pixels in each direction, the edge repeated (0: off).
+    pub shift: u32,
     /// The student's networks.
     pub actor: PixelActorConfig,
 }
@@ -53,6 +57,7 @@ impl Default for DistillConfig {
             batch_size: 128,
             learning_rate: 1e-3,
             max_samples: 150_000,
+            shift: 4,
             actor: PixelActorConfig::default(),
         }
     }
@@ -169,6 +174,26 @@ impl Dataset {
     }
 }
 
+/// Moves `image` (one view's `height × width × channels` bytes) by `dx` columns and `dy` rows,
+/// repeating the edge pixels into the uncovered border; `scratch` is reused.
+pub fn shift_image(image: &mut [u8], view: &ImageView, dx: i32, dy: i32, scratch: &mut Vec<u8>) {
+    let (h, w, c) = (
+        view.height as i32,
+        view.width as i32,
+        view.channels as usize,
+    );
+    scratch.clear();
+    scratch.extend_from_slice(image);
+    for y in 0..h {
+        let sy = (y - dy).clamp(0, h - 1);
+        for x in 0..w {
+            let sx = (x - dx).clamp(0, w - 1);
+            let (to, from) = (((y * w + x) as usize) * c, ((sy * w + sx) as usize) * c);
+            image[to..to + c].copy_from_slice(&scratch[from..from + c]);
+        }
+    }
+}
+
 /// A teacher: the actions (`rows × act_dim`, in the envs' action space) for `rows` privileged
 /// states, given row-major.
 pub type Teacher<'a> = dyn FnMut(&[f32]) -> Result<Vec<f32>> + 'a;
@@ -223,6 +248,7 @@ pub fn distill<E: Env>(
         .collect();
     let (mut batch_states, mut batch_images, mut batch_targets) =
         (Vec::new(), Vec::new(), Vec::new());
+    let mut shifted = Vec::new();
     let mut actions = vec![0.0f32; n * act_dim];
     for round in 0..config.rounds {
         let beta = config.beta(round);
@@ -281,6 +307,16 @@ pub fn distill<E: Env>(
                     &mut batch_images,
                     &mut batch_targets,
                 );
+                if config.shift > 0 {
+                    let s = config.shift as i32;
+                    for frame in batch_images.chunks_exact_mut(data.image_len) {
+                        for (v, view) in images.views.iter().enumerate() {
+                            let (dx, dy) = (rng.random_range(-s..=s), rng.random_range(-s..=s));
+                            let image = &mut frame[images.range(v)];
+                            shift_image(image, view, dx, dy, &mut shifted);
+                        }
+                    }
+                }
                 let l = student.train_step(
                     &mut adam,
                     &batch_states,
@@ -419,6 +455,22 @@ mod tests {
             "same seed, same student"
         );
         assert_ne!(run(4).1, weights);
+    }
+
+    #[test]
+    fn a_shift_moves_the_picture_and_repeats_the_edge() {
+        let view = ImageView {
+            name: "v".into(),
+            height: 2,
+            width: 3,
+            channels: 1,
+        };
+        let mut image = vec![1, 2, 3, 4, 5, 6];
+        let mut scratch = Vec::new();
+        shift_image(&mut image, &view, 1, 0, &mut scratch);
+        assert_eq!(image, [1, 1, 2, 4, 4, 5]);
+        shift_image(&mut image, &view, 0, -1, &mut scratch);
+        assert_eq!(image, [4, 4, 5, 4, 4, 5]);
     }
 
     #[test]
