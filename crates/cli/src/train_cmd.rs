@@ -154,7 +154,26 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let stop = stop_on_ctrl_c()?;
     let summary = train_until(&config, &run_dir, |p| reporter.update_until(p, &stop))?;
     reporter.finish();
-    print_summary(&summary)
+    print_summary(&summary)?;
+    if let Some(distill) = &config.distill {
+        if stop.load(Ordering::SeqCst) {
+            println!("interrupted: no camera policy distilled");
+            return Ok(());
+        }
+        let run = RunDir::new(&run_dir);
+        // The best model when an evaluation chose one, else the final one.
+        let teacher = Some(run.best_model())
+            .filter(|p| p.join("model.json").exists())
+            .unwrap_or_else(|| run.final_model());
+        crate::distill_cmd::distill_and_report(
+            &teacher,
+            &run_dir.join("student"),
+            distill,
+            config.seed,
+        )
+        .map(|_| ())?;
+    }
+    Ok(())
 }
 
 /// Ctrl-C (SIGINT) asks the run to stop after its current iteration, writing its final model,

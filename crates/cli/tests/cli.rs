@@ -856,3 +856,71 @@ fn training_through_identified_drives_keeps_them_in_the_model() {
     let (_, stderr) = text(&train(&["--drives", config.to_str().unwrap()]));
     assert!(stderr.contains("tiny.toml"), "{stderr}");
 }
+
+#[test]
+fn the_camera_config_trains_a_teacher_then_distils_and_evaluates_a_student() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("cam");
+    let config = repo().join("configs/distill_grasp.toml");
+    let out = fairgrasp(&[
+        "train",
+        "--config",
+        config.to_str().unwrap(),
+        "--run-dir",
+        run.to_str().unwrap(),
+        "--quiet",
+        "--set",
+        "total_timesteps=4096",
+        "--set",
+        "eval.freq=2048",
+        "--set",
+        "eval.episodes=2",
+        "--set",
+        "distill.rounds=2",
+        "--set",
+        "distill.steps_per_round=3",
+        "--set",
+        "distill.n_envs=2",
+        "--set",
+        "distill.batch_size=4",
+        "--set",
+        "distill.eval_episodes=2",
+        "--set",
+        "distill.env.camera.width=24",
+        "--set",
+        "distill.env.camera.height=24",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("round  1: β 0.67,     12 states"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("/2 held-out episodes succeeded"),
+        "{stdout}"
+    );
+    let student = run.join("student");
+    assert!(student.join("student.safetensors").exists());
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(student.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        (summary["episodes"].as_u64(), summary["samples"].as_u64()),
+        (Some(2), Some(12))
+    );
+
+    // A bad [distill] key is named before anything trains.
+    let out = fairgrasp(&[
+        "train",
+        "--config",
+        config.to_str().unwrap(),
+        "--run-dir",
+        dir.path().join("bad").to_str().unwrap(),
+        "--set",
+        "distill.env.camera.width=8",
+    ]);
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success());
+    assert!(stderr.contains("distill.env.camera.width"), "{stderr}");
+}

@@ -1,6 +1,7 @@
 //! [`TrainConfig`]: everything that defines a training run, as `configs/*.toml` write it.
 
 use crate::algo::AlgoConfig;
+use crate::distill::DistillConfig;
 use crate::error::{Result, RlError};
 use fairgrasp_env::registry;
 use fairgrasp_env::wrappers::VecNormalizeConfig;
@@ -89,6 +90,10 @@ pub struct TrainConfig {
     pub eval: EvalConfig,
     /// The environment's own settings (its TOML table; missing keys take their defaults).
     pub env: toml::Table,
+    /// `[distill]`: after training, teach a camera policy from the best model
+    /// (teacher–student distillation, docs/camera.md); absent: no camera policy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distill: Option<DistillConfig>,
 }
 
 impl Default for TrainConfig {
@@ -105,6 +110,7 @@ impl Default for TrainConfig {
             normalize: VecNormalizeConfig::default(),
             eval: EvalConfig::default(),
             env: toml::Table::new(),
+            distill: None,
         }
     }
 }
@@ -180,6 +186,20 @@ impl TrainConfig {
             })
         };
         check("env", &self.env)?;
+        if let Some(distill) = &self.distill {
+            distill.validate()?;
+            let mut student = self.env.clone();
+            let camera = toml::Table::from_iter([(
+                "camera".to_string(),
+                toml::Value::Table(toml::Table::from_iter([(
+                    "mode".to_string(),
+                    toml::Value::String("rgb+state".into()),
+                )])),
+            )]);
+            fairgrasp_env::config::overlay(&mut student, &camera);
+            fairgrasp_env::config::overlay(&mut student, &distill.env);
+            check("distill.env", &student)?;
+        }
         if !self.eval.env.is_empty() {
             let eval_env = self.eval_env();
             check("eval.env", &eval_env)?;

@@ -10,6 +10,8 @@
 //! passes of minibatch regression (mean squared error) over every labelled step so far (up to
 //! `max_samples`, the oldest dropped). Images stay `u8` in the dataset.
 
+pub mod stage;
+
 use crate::error::{Result, RlError};
 use crate::nn::adam::Adam;
 use crate::policies::pixel_actor::{PixelActor, PixelActorConfig, PixelCache};
@@ -45,6 +47,15 @@ pub struct DistillConfig {
     pub shift: u32,
     /// The student's networks.
     pub actor: PixelActorConfig,
+    /// Envs stepped together while collecting.
+    pub n_envs: usize,
+    /// Threads stepping them.
+    pub threads: usize,
+    /// Held-out episodes the student plays alone at the end.
+    pub eval_episodes: u32,
+    /// The student's environment: these settings over the teacher's, `camera.mode` being
+    /// `"rgb+state"` unless set here (e.g. `[distill.env.camera.randomize] enabled = true`).
+    pub env: toml::Table,
 }
 
 impl Default for DistillConfig {
@@ -59,6 +70,10 @@ impl Default for DistillConfig {
             max_samples: 150_000,
             shift: 4,
             actor: PixelActorConfig::default(),
+            n_envs: 16,
+            threads: 2,
+            eval_episodes: 100,
+            env: toml::Table::new(),
         }
     }
 }
@@ -89,6 +104,9 @@ impl DistillConfig {
         }
         if self.actor.features == 0 {
             return bad("actor.features", "must be at least 1");
+        }
+        if self.n_envs == 0 || self.n_envs > 1024 {
+            return bad("n_envs", "must be in 1..=1024");
         }
         Ok(())
     }

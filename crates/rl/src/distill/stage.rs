@@ -1,0 +1,106 @@
+//! Distillation as a stage of a run: a saved teacher model in, a camera policy saved and
+//! evaluated out (what `fairgrasp train` runs after training when its config has `[distill]`,
+//! and `fairgrasp distill` runs on its own).
+
+use crate::algorithm::TensorMap;
+use crate::distill::{DistillConfig, RoundReport, distill, evaluate_student};
+use crate::error::{Result, RlError};
+use crate::model::save_tensors;
+use crate::policies::pixel_actor::PixelActor;
+use crate::policy::Policy;
+use crate::train::HELD_OUT_SEED_BASE;
+use fairgrasp_env::atomic;
+use fairgrasp_env::wrappers::RescaleAction;
+use fairgrasp_env::{Env, VecEnv, VectorEnv, registry};
+use serde::Serialize;
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::time::Instant;
+
+/// What a distillation stage did (written as `student/summary.json`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StudentSummary {
+    /// Held-out episodes the student played alone, and how many succeeded.
+    pub episodes: u32,
+    /// See [`Self::episodes`].
+    pub successes: u32,
+    /// Seconds of distillation (collection and training), and of the evaluation.
+    pub distill_seconds: f64,
+    /// See [`Self::distill_seconds`].
+    pub eval_seconds: f64,
+    /// The student's trained values.
+    pub parameters: usize,
+    /// Labelled states the student learnt from.
+    pub samples: usize,
+}
+
+/// The student's environment: the teacher's settings with `camera.mode = "rgb+state"`, then
+/// `config.env` over them.
+pub fn student_env(teacher: &Policy, config: &DistillConfig) -> Result<toml::Table> {
+    let mut table = teacher.env_settings(&["camera.mode=\"rgb+state\"".to_string()])?;
+    fairgrasp_env::config::overlay(&mut table, &config.env);
+    registry::validate(teacher.env_id(), &table).map_err(|e| match e {
+        fairgrasp_env::EnvError::Config { key, problem } => RlError::Config {
+            key: format!("distill.env.{key}"),
+            problem,
+        },
+        other => other.into(),
+    })?;
+    Ok(table)
+}
+
+/// Distils the model at `teacher_dir` into a camera policy saved in `student_dir`
+/// (`student.safetensors`, `summary.json`), then evaluates it alone on `config.eval_episodes`
+/// held-out episodes. `on_round` sees each round. Returns the summary and the student.
+pub fn run_stage(
+    teacher_dir: &Path,
+    student_dir: &Path,
+    config: &DistillConfig,
+    seed: u64,
+    on_round: &mut dyn FnMut(&RoundReport, &PixelActor) -> ControlFlow<()>,
+) -> Result<(StudentSummary, PixelActor)> {
+    config.validate()?;
+    let started = Instant::now();
+    let mut teacher = Policy::load(teacher_dir)?;
+    let table = student_env(&teacher, config)?;
+    let env_id = teacher.env_id().to_string();
+    let envs = (0..config.n_envs)
+        .map(|_| Ok(RescaleAction::new(registry::make(&env_id, &table)?)?))
+        .collect::<Result<Vec<_>>>()?;
+    let mut envs = VecEnv::new(envs, config.threads)?;
+    let teacher_dim = teacher.obs_dim();
+    let mut label = |rows: &[f32]| teacher.act_batch(rows, true);
+    let mut samples = 0;
+    let mut watch = |r: &RoundReport, s: &PixelActor| {
+        samples = r.samples;
+        on_round(r, s)
+    };
+    let student = distill(&mut label, teacher_dim, &mut envs, config, seed, &mut watch)?;
+    envs.close();
+    let distill_seconds = started.elapsed().as_secs_f64();
+    let io = |path: &Path, e: std::io::Error| RlError::Other(format!("{}: {e}", path.display()));
+    std::fs::create_dir_all(student_dir).map_err(|e| io(student_dir, e))?;
+    let weights: TensorMap = {
+        let data = student.varmap().data().lock().expect("varmap lock");
+        (data.iter())
+            .map(|(k, v)| (k.clone(), v.as_tensor().clone()))
+            .collect()
+    };
+    save_tensors(&student_dir.join("student.safetensors"), &weights)?;
+    let started = Instant::now();
+    let mut env = RescaleAction::new(registry::make(&env_id, &table)?)?;
+    let successes = evaluate_student(&student, &mut env, config.eval_episodes, HELD_OUT_SEED_BASE)?;
+    env.close();
+    let summary = StudentSummary {
+        episodes: config.eval_episodes,
+        successes,
+        distill_seconds,
+        eval_seconds: started.elapsed().as_secs_f64(),
+        parameters: student.parameter_count(),
+        samples,
+    };
+    let json = serde_json::to_string_pretty(&summary).map_err(|e| RlError::Other(e.to_string()))?;
+    let path = student_dir.join("summary.json");
+    atomic::write(&path, json.as_bytes()).map_err(|e| io(&path, e))?;
+    Ok((summary, student))
+}
