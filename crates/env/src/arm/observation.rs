@@ -126,6 +126,20 @@ impl<'a> ObsWriter<'a> {
     }
 }
 
+/// Joint angles and speeds, TCP position and orientation (two rotation-matrix columns:
+/// continuous, unlike Euler angles near a top-down pose): how the `rich` layout and the pixel
+/// modes' arm observation begin.
+fn joints_and_tcp(s: &ArmState, out: &mut ObsWriter) {
+    use NoiseGroup::*;
+    out.push(JointPosition, &s.q);
+    out.push(JointVelocity, &s.qd);
+    out.push3(EePosition, &s.tcp.translation.vector);
+    let m = s.tcp.rotation.to_rotation_matrix();
+    for c in 0..2 {
+        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
+    }
+}
+
 /// The `rich` layout around object `i` (33 values plus the previous action; docs/tasks.md):
 /// joints, velocities, TCP position and orientation (two rotation-matrix columns: continuous,
 /// unlike Euler angles near a top-down pose), the object's position, its yaw relative to the
@@ -139,13 +153,7 @@ pub(crate) fn rich_observation(
 ) {
     use NoiseGroup::*;
     let object = &s.objects[i];
-    out.push(JointPosition, &s.q);
-    out.push(JointVelocity, &s.qd);
-    out.push3(EePosition, &s.tcp.translation.vector);
-    let m = s.tcp.rotation.to_rotation_matrix();
-    for c in 0..2 {
-        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
-    }
+    joints_and_tcp(s, out);
     out.push3(ObjectPosition, &object.pose.translation.vector);
     let yaw = s.relative_yaw(i);
     out.push(
@@ -167,13 +175,7 @@ pub(crate) fn rich_observation(
 /// previous action (22 values plus the action). Nothing about the objects: the camera shows them.
 pub(crate) fn arm_observation(s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
     use NoiseGroup::*;
-    out.push(JointPosition, &s.q);
-    out.push(JointVelocity, &s.qd);
-    out.push3(EePosition, &s.tcp.translation.vector);
-    let m = s.tcp.rotation.to_rotation_matrix();
-    for c in 0..2 {
-        out.push3(EeOrientation, &m.matrix().column(c).into_owned());
-    }
+    joints_and_tcp(s, out);
     out.push1(Gripper, s.gripper_opening);
     out.push(None, previous_action);
 }

@@ -192,24 +192,13 @@ mod tests {
 
         let (h, w, c, f, k) = (shape.height, shape.width, 3, 4, 3);
         let (oh, ow) = (shape.out_height(), shape.out_width());
-        let x = Var::from_tensor(
-            &Tensor::from_vec(input.clone(), (batch, h, w, c), &dev)
-                .unwrap()
-                .permute((0, 3, 1, 2))
-                .unwrap()
-                .contiguous()
-                .unwrap(),
-        )
-        .unwrap();
-        let kernel = Var::from_tensor(
-            &Tensor::from_vec(weight.clone(), (f, k, k, c), &dev)
-                .unwrap()
-                .permute((0, 3, 1, 2))
-                .unwrap()
-                .contiguous()
-                .unwrap(),
-        )
-        .unwrap();
+        // Channel-last values as a channel-first variable.
+        let nchw = |values: &[f32], dims: (usize, usize, usize, usize)| {
+            let t = Tensor::from_vec(values.to_vec(), dims, &dev).unwrap();
+            Var::from_tensor(&t.permute((0, 3, 1, 2)).unwrap().contiguous().unwrap()).unwrap()
+        };
+        let x = nchw(&input, (batch, h, w, c));
+        let kernel = nchw(&weight, (f, k, k, c));
         let b = Var::from_tensor(&Tensor::new(&bias, &dev).unwrap()).unwrap();
         let y = x
             .as_tensor()

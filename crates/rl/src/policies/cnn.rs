@@ -120,6 +120,11 @@ impl CnnEncoder {
         self.convs[0].in_len()
     }
 
+    /// Number of parameter tensors (a weight and a bias per layer).
+    pub fn param_count(&self) -> usize {
+        2 * (self.convs.len() + 1)
+    }
+
     /// `(name, shape)` of each parameter: per convolution `conv<i>.weight` (`filters × kernel ×
     /// kernel × channels`) and `conv<i>.bias`, then `fc.weight` (`features × flat`), `fc.bias`.
     pub fn param_shapes(&self) -> Vec<(String, Vec<usize>)> {

@@ -241,7 +241,7 @@ impl PixelActor {
             for obs in images.chunks_exact(per_obs).take(batch) {
                 gathered.extend_from_slice(&obs[range.clone()]);
             }
-            let count = encoder.param_shapes().len();
+            let count = encoder.param_count();
             let own = &params[offset..offset + count];
             encoder.forward(own, gathered, batch, &mut cache.encoders[v]);
             offset += count;
@@ -324,7 +324,7 @@ impl PixelActor {
             loss += (e * e) as f64;
             cache.d_head.push(2.0 * e / n);
         }
-        let offset: usize = self.encoders.iter().map(|e| e.param_shapes().len()).sum();
+        let offset: usize = self.encoders.iter().map(CnnEncoder::param_count).sum();
         for (l, &(inp, out)) in self.head.iter().enumerate().rev() {
             if l + 1 < self.head.len() {
                 relu_backward(&cache.head[l + 1], &mut cache.d_head);
@@ -347,7 +347,7 @@ impl PixelActor {
         let width = self.head[0].0;
         let mut start = 0;
         for (v, encoder) in self.encoders.iter().enumerate() {
-            let count = encoder.param_shapes().len();
+            let count = encoder.param_count();
             let mut d_features: Vec<f32> = (0..batch)
                 .flat_map(|b| {
                     let row = b * width + v * features;
