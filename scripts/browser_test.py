@@ -83,7 +83,9 @@ class Page:
             if self.eval(expression):
                 return
             time.sleep(0.2)
-        raise AssertionError(f"timed out waiting for {what}")
+        seen = self.eval("JSON.stringify({state, error: $('error').textContent,"
+                         " sliders: state && state.joints.map((_, i) => $('joint-' + i).value)})")
+        raise AssertionError(f"timed out waiting for {what}; the page had {seen}")
 
     def scene_shot(self):
         """The scene image as shown on the page, as a list of RGB pixels (and the PNG)."""

@@ -103,10 +103,19 @@ function show(s) {
   }
 }
 
+// State answers can arrive out of order (the poll and a command's refresh race); one asked
+// before an answer already shown is stale and would move the sliders back.
+let stateAsked = 0;
+let stateShown = 0;
 async function refresh() {
+  const ticket = ++stateAsked;
   try {
     const r = await fetch("/state");
-    if (r.ok) show(await r.json());
+    if (!r.ok) return;
+    const s = await r.json();
+    if (ticket < stateShown) return;
+    stateShown = ticket;
+    show(s);
   } catch (e) {
     $("error").textContent = `lost the server: ${e}`;
   }
