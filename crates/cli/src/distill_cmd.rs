@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use fairgrasp_env::wrappers::RescaleAction;
 use fairgrasp_env::{Env, registry};
 use fairgrasp_rl::Policy;
-use fairgrasp_rl::distill::stage::{run_stage, student_env};
+use fairgrasp_rl::distill::stage::run_stage;
 use fairgrasp_rl::distill::{DistillConfig, RoundReport, evaluate_student};
 use fairgrasp_rl::policies::pixel_actor::PixelActor;
 use fairgrasp_rl::train::HELD_OUT_SEED_BASE;
@@ -71,13 +71,13 @@ pub const HELD_OUT_CONDITIONS: &[(&str, &[&str])] = &[
 ];
 
 /// Runs the distillation stage, printing each round and the student's held-out success;
-/// returns the student.
+/// returns the student as saved.
 pub fn distill_and_report(
     teacher: &Path,
     student_dir: &Path,
     config: &DistillConfig,
     seed: u64,
-) -> Result<PixelActor> {
+) -> Result<Policy> {
     println!(
         "distilling {} into a camera policy: {} envs, {} rounds of {} steps (CPU: {})",
         teacher.display(),
@@ -117,28 +117,24 @@ pub fn distill_and_report(
 pub fn run(args: &DistillArgs) -> Result<()> {
     let config: DistillConfig = fairgrasp_env::config::parse_toml("", &args.overrides)
         .context("the distillation settings")?;
-    let student = distill_and_report(&args.teacher, &args.run_dir, &config, args.seed)?;
+    let mut student = distill_and_report(&args.teacher, &args.run_dir, &config, args.seed)?;
     if args.held_out {
-        evaluate_held_out(args, &config, &student)?;
+        evaluate_held_out(&config, &mut student)?;
     }
     Ok(())
 }
 
 /// The saved student under each of [`HELD_OUT_CONDITIONS`].
-fn evaluate_held_out(
-    args: &DistillArgs,
-    config: &DistillConfig,
-    student: &PixelActor,
-) -> Result<()> {
-    let teacher = Policy::load(&args.teacher)?;
-    let base = student_env(&teacher, config)?;
+fn evaluate_held_out(config: &DistillConfig, student: &mut Policy) -> Result<()> {
+    let base = student.env_settings(&[])?;
+    let env_id = student.env_id().to_string();
     for (name, overrides) in HELD_OUT_CONDITIONS {
         let mut table = base.clone();
         fairgrasp_env::config::apply_override(&mut table, "camera.randomize.enabled=true")?;
         for o in overrides.iter() {
             fairgrasp_env::config::apply_override(&mut table, o)?;
         }
-        let mut env = RescaleAction::new(registry::make(teacher.env_id(), &table)?)?;
+        let mut env = RescaleAction::new(registry::make(&env_id, &table)?)?;
         let successes =
             evaluate_student(student, &mut env, config.eval_episodes, HELD_OUT_SEED_BASE)?;
         env.close();

@@ -80,8 +80,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let result = match &mut trace {
         // One thread: the trace lists the steps in order.
         Some(out) => evaluate(
-            &mut |obs| {
-                let action = policy.act(obs, true)?;
+            &mut |obs, images| {
+                let action = policy.act_with_images(obs, images, true)?;
                 let line = serde_json::json!({ "obs": obs, "action": action });
                 writeln!(out, "{line}").map_err(|e| {
                     fairgrasp_rl::error::RlError::Other(format!("writing the trace: {e}"))
@@ -126,7 +126,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         println!(
             "{} ({} on {}, trained {} steps), {} episodes from seed {}:",
             dir,
-            meta.algo.algo(),
+            meta.trained_by(),
             env_id,
             meta.num_timesteps,
             args.episodes,
@@ -161,7 +161,9 @@ pub fn evaluate_model(
     let dir = policy.dir().unwrap_or(path).to_path_buf();
     let make_actor = || -> fairgrasp_rl::error::Result<Actor<'static>> {
         let mut copy = Policy::load(&dir)?;
-        Ok(Box::new(move |obs: &[f32]| copy.act(obs, true)))
+        Ok(Box::new(move |obs: &[f32], images: Option<&[u8]>| {
+            copy.act_with_images(obs, images, true)
+        }))
     };
     Ok(evaluate_parallel(
         &make_actor,

@@ -92,7 +92,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
         loop {
             frames.push(captioned(render_rgb(&mut env, w, h)?, w, h, &caption)?);
             let mut action = match policy.as_mut() {
-                Some(p) => p.act(&obs, true)?,
+                Some(p) => p.act_with_images(&obs, env.image(), true)?,
                 None => (0..env.action_space().dim())
                     .map(|_| rng.random_range(-1.0f32..=1.0))
                     .collect(),

@@ -374,6 +374,7 @@ fn export_writes_onnx_and_safetensors_beside_the_model_and_says_how_to_check_the
         train_seed: 0,
         n_envs: 1,
         privileged_dim: 0,
+        pixel_actor: None,
     };
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model");
@@ -901,13 +902,42 @@ fn the_camera_config_trains_a_teacher_then_distils_and_evaluates_a_student() {
         "{stdout}"
     );
     let student = run.join("student");
-    assert!(student.join("student.safetensors").exists());
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(student.join("summary.json")).unwrap())
             .unwrap();
     assert_eq!(
         (summary["episodes"].as_u64(), summary["samples"].as_u64()),
         (Some(2), Some(12))
+    );
+    // The student is a model: evaluated on its own camera env, exported with image inputs.
+    let out = fairgrasp(&[
+        "eval",
+        "--model",
+        student.to_str().unwrap(),
+        "--episodes",
+        "2",
+        "--json",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let eval: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(eval["episodes"].as_u64(), Some(2), "{stdout}");
+    let onnx = dir.path().join("student.onnx");
+    let out = fairgrasp(&[
+        "export",
+        "--model",
+        student.to_str().unwrap(),
+        "--format",
+        "onnx",
+        "--out",
+        onnx.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let bytes = std::fs::read(&onnx).unwrap();
+    assert!(
+        bytes.windows(9).any(|w| w == b"scene_rgb"),
+        "the image input is named"
     );
 
     // A bad [distill] key is named before anything trains.

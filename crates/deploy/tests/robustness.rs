@@ -47,6 +47,7 @@ fn tiny_model(dir: &Path) {
         train_seed: 1,
         n_envs: 1,
         privileged_dim: 0,
+        pixel_actor: None,
     };
     save_model(dir, &ppo.weights().unwrap(), &meta).unwrap();
 }

@@ -120,6 +120,14 @@ impl ImageSpace {
         self.len() == 0
     }
 
+    /// The views in words: `scene_rgb 64×64×3, wrist_depth 64×64×1`.
+    pub fn describe(&self) -> String {
+        let views: Vec<String> = (self.views.iter())
+            .map(|v| format!("{} {}×{}×{}", v.name, v.height, v.width, v.channels))
+            .collect();
+        views.join(", ")
+    }
+
     /// Where view `i` lies in the buffer.
     pub fn range(&self, i: usize) -> std::ops::Range<usize> {
         let start: usize = self.views[..i].iter().map(ImageView::len).sum();

@@ -30,9 +30,12 @@ pub struct EvalResult {
     pub confirmed: bool,
 }
 
-/// Something that acts: one raw observation in, one action out (it normalises, if the model
-/// does).
-pub type Actor<'a> = Box<dyn FnMut(&[f32]) -> Result<Vec<f32>> + Send + 'a>;
+/// What acts: one raw observation in (the vector, and the cameras' images in a camera mode),
+/// one action out (it normalises, if the model does).
+pub type Act<'a> = dyn FnMut(&[f32], Option<&[u8]>) -> Result<Vec<f32>> + 'a;
+
+/// An owned [`Act`] that can go to another thread.
+pub type Actor<'a> = Box<dyn FnMut(&[f32], Option<&[u8]>) -> Result<Vec<f32>> + Send + 'a>;
 
 /// One finished episode.
 struct EpisodeOutcome {
@@ -48,14 +51,14 @@ fn make_env(env_id: &str, env_config: &toml::Table) -> Result<RescaleAction<Box<
 
 /// Plays the episode seeded `seed` to its end.
 fn play_episode(
-    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    policy: &mut Act,
     env: &mut RescaleAction<Box<dyn Env>>,
     seed: u64,
 ) -> Result<EpisodeOutcome> {
     let (mut obs, _) = env.reset(Some(seed))?;
     let mut episode_return = 0.0f32;
     loop {
-        let mut action = policy(&obs)?;
+        let mut action = policy(&obs, env.image())?;
         env.action_space().clip(&mut action);
         let step = env.step(&action)?;
         episode_return += step.reward;
@@ -102,7 +105,7 @@ fn summarize(outcomes: &[EpisodeOutcome], episodes: u32) -> EvalResult {
 /// Runs a deterministic policy on a fresh environment `env_id` (built through the registry from
 /// `env_config`) for episodes seeded `seed, seed+1, …`.
 pub fn evaluate(
-    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    policy: &mut Act,
     env_id: &str,
     env_config: &toml::Table,
     episodes: u32,
@@ -191,7 +194,7 @@ pub fn evaluate_parallel(
 /// Plays one deterministic episode (seed `seed`) of `env_id` rendered by its `[render]`
 /// camera at `size`, and returns it as a GIF.
 pub fn record_episode(
-    policy: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    policy: &mut Act,
     env_id: &str,
     env_config: &toml::Table,
     seed: u64,
@@ -221,7 +224,7 @@ pub fn record_episode(
     };
     loop {
         frame(&mut env)?;
-        let mut action = policy(&obs)?;
+        let mut action = policy(&obs, env.image())?;
         env.action_space().clip(&mut action);
         let step = env.step(&action)?;
         obs = step.obs;
@@ -253,7 +256,7 @@ mod tests {
 
     /// A deterministic actor that depends on what it sees.
     fn reactive(act_dim: usize) -> Actor<'static> {
-        Box::new(move |obs: &[f32]| {
+        Box::new(move |obs: &[f32], _: Option<&[u8]>| {
             Ok((0..act_dim)
                 .map(|i| (obs[i % obs.len()] * 3.0 + i as f32).sin())
                 .collect())
@@ -285,7 +288,7 @@ mod tests {
     fn a_failing_actor_fails_the_parallel_evaluation_with_its_error() {
         let err = evaluate_parallel(
             &|| -> Result<Actor<'static>> {
-                Ok(Box::new(|_obs: &[f32]| {
+                Ok(Box::new(|_obs: &[f32], _: Option<&[u8]>| {
                     Err(RlError::Other("actor broke".into()))
                 }))
             },

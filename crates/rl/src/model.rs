@@ -9,8 +9,10 @@
 use crate::algo::{Algo, AlgoConfig};
 use crate::algorithm::TensorMap;
 use crate::error::{Result, RlError};
+use crate::policies::pixel_actor::PixelActorConfig;
 use candle_core::Device;
 use fairgrasp_env::atomic;
+use fairgrasp_env::spaces::ImageSpace;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -53,6 +55,20 @@ pub struct ModelMeta {
     /// 0: none). The policy never reads them.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub privileged_dim: usize,
+    /// A camera policy (distilled from a teacher; `algo` is then the teacher's): its network and
+    /// the images it reads beside the `obs_dim` state values. `None`: the actor of `algo`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_actor: Option<PixelActorMeta>,
+}
+
+/// What a camera policy's network is, besides its weights.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PixelActorMeta {
+    /// Its encoders' and head's shape.
+    pub actor: PixelActorConfig,
+    /// The cameras' images it reads, in the order their bytes follow one another.
+    pub images: ImageSpace,
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -113,6 +129,15 @@ impl ModelMeta {
             ));
         }
         serde_json::from_value(value).map_err(|e| not_a_model(&e))
+    }
+
+    /// How the model learnt, in words: `ppo`, or `distilled from a ppo teacher` for a camera
+    /// policy.
+    pub fn trained_by(&self) -> String {
+        match &self.pixel_actor {
+            None => self.algo.algo().to_string(),
+            Some(_) => format!("distilled from a {} teacher", self.algo.algo()),
+        }
     }
 
     /// Errors unless the model was made by `algo` for these observation and action sizes.

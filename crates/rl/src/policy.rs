@@ -8,7 +8,9 @@ use crate::algo::AlgoConfig;
 use crate::algorithm::TensorMap;
 use crate::error::{Result, RlError};
 use crate::model::{ModelMeta, load_tensors, resolve_model_dir};
+use crate::policies::pixel_actor::{PixelActor, PixelCache};
 use crate::policies::{ActorDescription, ActorNet};
+use fairgrasp_env::spaces::ImageSpace;
 use fairgrasp_env::wrappers::VecNormalizeState;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -21,10 +23,18 @@ pub struct Policy {
     meta: ModelMeta,
     /// The model directory it was read from (none when built from parts).
     dir: Option<PathBuf>,
-    actor: Box<dyn ActorNet>,
+    actor: Actor,
     normalization: Option<VecNormalizeState>,
     /// The stream of stochastic actions' noise.
     rng: ChaCha8Rng,
+}
+
+/// The network that acts.
+enum Actor {
+    /// The actor of the model's algorithm, on the observation vector.
+    Vector(Box<dyn ActorNet>),
+    /// A camera policy, on the state vector and the cameras' images.
+    Pixel(Box<PixelActor>, PixelCache),
 }
 
 impl Policy {
@@ -51,9 +61,24 @@ impl Policy {
                 meta.obs_dim, meta.act_dim
             )));
         }
-        let actor = (meta.algo)
-            .load_actor(weights, meta.obs_dim, meta.act_dim, meta.privileged_dim)
-            .map_err(|e| RlError::Model(format!("model.safetensors: {e}")))?;
+        let actor = match &meta.pixel_actor {
+            None => Actor::Vector(
+                (meta.algo)
+                    .load_actor(weights, meta.obs_dim, meta.act_dim, meta.privileged_dim)
+                    .map_err(|e| RlError::Model(format!("model.safetensors: {e}")))?,
+            ),
+            Some(pixel) => {
+                let actor = PixelActor::from_weights(
+                    &pixel.actor,
+                    &pixel.images,
+                    meta.obs_dim,
+                    meta.act_dim,
+                    weights,
+                )
+                .map_err(|e| RlError::Model(format!("model.safetensors: {e}")))?;
+                Actor::Pixel(Box::new(actor), PixelCache::default())
+            }
+        };
         let normalization = match &meta.normalization {
             Some(json) => Some(VecNormalizeState::from_json(json).map_err(|p| {
                 RlError::Model(format!("model.json: normalisation statistics: {p}"))
@@ -106,20 +131,50 @@ impl Policy {
         self.act_rows(obs, deterministic)
     }
 
-    fn act_rows(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
-        if let Some(i) = obs.iter().position(|v| !v.is_finite()) {
-            let dim = self.meta.obs_dim;
-            let row = if obs.len() > dim {
-                format!("observation {}, ", i / dim)
-            } else {
-                String::new()
-            };
+    /// Actions for whole observations of an environment: their vectors (row-major) and, for a
+    /// camera policy, their images (each observation's bytes of every view in
+    /// [`Self::image_space`] order, as [`fairgrasp_env::Env::image`] gives them). A policy
+    /// without cameras ignores `images`. A camera policy's action is deterministic.
+    pub fn act_with_images(
+        &mut self,
+        obs: &[f32],
+        images: Option<&[u8]>,
+        deterministic: bool,
+    ) -> Result<Vec<f32>> {
+        let Some(space) = self.image_space().cloned() else {
+            return self.act_batch(obs, deterministic);
+        };
+        let dim = self.meta.obs_dim;
+        let rows = obs.len() / dim;
+        if obs.is_empty() || !obs.len().is_multiple_of(dim) {
             return Err(self.error(format!(
-                "{row}value {} is {} (observations must be finite)",
-                i % dim,
-                obs[i]
+                "{} state values are not whole observations of {dim} values",
+                obs.len()
             )));
         }
+        let Some(images) = images else {
+            return Err(self.error(format!(
+                "the model reads camera images ({}); none were given",
+                space.describe()
+            )));
+        };
+        if images.len() != rows * space.len() {
+            return Err(self.error(format!(
+                "{} image bytes for {rows} observation(s); the model reads {} bytes each ({})",
+                images.len(),
+                space.len(),
+                space.describe()
+            )));
+        }
+        check_finite(obs, dim).map_err(|e| self.error(e))?;
+        let Actor::Pixel(actor, cache) = &mut self.actor else {
+            unreachable!("matched above")
+        };
+        Ok(actor.forward(obs, images, rows, cache)?)
+    }
+
+    fn act_rows(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
+        check_finite(obs, self.meta.obs_dim).map_err(|e| self.error(e))?;
         let normalized;
         let input = match &self.normalization {
             Some(n) => {
@@ -128,7 +183,31 @@ impl Policy {
             }
             None => obs,
         };
-        self.actor.act(input, deterministic, &mut self.rng)
+        match &self.actor {
+            Actor::Vector(actor) => actor.act(input, deterministic, &mut self.rng),
+            Actor::Pixel(actor, _) => Err(self.error(format!(
+                "the model reads camera images ({}) beside its {} state values: act with act_with_images",
+                actor.images().describe(),
+                self.meta.obs_dim
+            ))),
+        }
+    }
+
+    /// The cameras' images a camera policy reads beside the state vector (`None`: the model
+    /// acts on the observation vector alone).
+    pub fn image_space(&self) -> Option<&ImageSpace> {
+        match &self.actor {
+            Actor::Vector(_) => None,
+            Actor::Pixel(actor, _) => Some(actor.images()),
+        }
+    }
+
+    /// The camera policy's network, for exporters.
+    pub fn pixel_actor(&self) -> Option<&PixelActor> {
+        match &self.actor {
+            Actor::Vector(_) => None,
+            Actor::Pixel(actor, _) => Some(actor),
+        }
     }
 
     /// Restarts the stream of stochastic actions from `seed`.
@@ -145,12 +224,19 @@ impl Policy {
     /// The parameters of the network that acts, by their names in `model.safetensors`, for
     /// exporters that rebuild the actor elsewhere (see [`Self::actor_description`]).
     pub fn actor_tensors(&self) -> TensorMap {
-        self.actor.tensors()
+        match &self.actor {
+            Actor::Vector(actor) => actor.tensors(),
+            Actor::Pixel(actor, _) => actor.weights(),
+        }
     }
 
-    /// Which of [`Self::actor_tensors`] make the actor's layers, and its activation and head.
-    pub fn actor_description(&self) -> ActorDescription {
-        self.actor.description()
+    /// Which of [`Self::actor_tensors`] make the actor's layers, and its activation and head
+    /// (`None` for a camera policy: see [`Self::pixel_actor`]).
+    pub fn actor_description(&self) -> Option<ActorDescription> {
+        match &self.actor {
+            Actor::Vector(actor) => Some(actor.description()),
+            Actor::Pixel(..) => None,
+        }
     }
 
     /// The model's description (`model.json`).
@@ -212,4 +298,21 @@ impl Policy {
             None => RlError::Model(problem),
         }
     }
+}
+
+/// Errors name the first value that is not finite (and its row when there are several).
+fn check_finite(obs: &[f32], dim: usize) -> std::result::Result<(), String> {
+    let Some(i) = obs.iter().position(|v| !v.is_finite()) else {
+        return Ok(());
+    };
+    let row = if obs.len() > dim {
+        format!("observation {}, ", i / dim)
+    } else {
+        String::new()
+    };
+    Err(format!(
+        "{row}value {} is {} (observations must be finite)",
+        i % dim,
+        obs[i]
+    ))
 }

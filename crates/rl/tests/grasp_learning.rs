@@ -33,7 +33,7 @@ fn the_default_training_reaches_its_stop_rule_and_its_model_grasps_held_out_epis
     let mut policy = Policy::load(&dir.path().join("best")).unwrap();
     let env = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
     let held_out = evaluate(
-        &mut |obs: &[f32]| policy.act(obs, true),
+        &mut |obs: &[f32], _: Option<&[u8]>| policy.act(obs, true),
         ENV_ID,
         &env,
         100,

@@ -31,6 +31,7 @@ fn meta<V: VectorEnv>(
         train_seed: 1,
         n_envs: venv.num_envs(),
         privileged_dim: 0,
+        pixel_actor: None,
     }
 }
 
@@ -406,4 +407,90 @@ fn models_saved_in_format_1_load_and_act_as_their_weights_say() {
             }
         }
     }
+}
+
+/// A camera policy saved as a model (`pixel_actor` in `model.json`) loads and acts on the
+/// observations of its environment exactly as the network it was saved from; its errors name
+/// what is missing.
+#[test]
+fn a_loaded_camera_policy_acts_on_state_and_images_as_its_network() {
+    use fairgrasp_env::{GraspConfig, GraspEnv, ObsMode};
+    use fairgrasp_rl::model::PixelActorMeta;
+    use fairgrasp_rl::policies::pixel_actor::{PixelActor, PixelActorConfig, PixelCache};
+    use rand::SeedableRng;
+
+    let mut config = GraspConfig::default();
+    config.camera.mode = ObsMode::RgbState;
+    (config.camera.width, config.camera.height) = (24, 24);
+    let mut env = GraspEnv::new(config.clone()).unwrap();
+    let images = env.image_space().unwrap().clone();
+    let (state_dim, act_dim) = (env.observation_space().dim(), env.action_space().dim());
+    let actor_config = PixelActorConfig {
+        features: 8,
+        net_arch: vec![16],
+        ..PixelActorConfig::default()
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+    let mut actor = PixelActor::new(&actor_config, &images, state_dim, act_dim, &mut rng).unwrap();
+    let (obs, _) = env.reset(Some(4)).unwrap();
+    actor.fit_state_scale(&[obs.clone(), obs.iter().map(|v| v + 0.5).collect()].concat());
+    let meta = ModelMeta {
+        format_version: FORMAT_VERSION,
+        algo: AlgoConfig::default(),
+        obs_dim: state_dim,
+        act_dim,
+        env_id: "FaArmGrasp-v0".into(),
+        env: serde_json::to_value(&config).unwrap(),
+        normalization: None,
+        num_timesteps: 0,
+        train_seed: 0,
+        n_envs: 1,
+        privileged_dim: 0,
+        pixel_actor: Some(PixelActorMeta {
+            actor: actor_config,
+            images: images.clone(),
+        }),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    save_model(dir.path(), &actor.weights(), &meta).unwrap();
+    let mut policy = Policy::load(dir.path()).unwrap();
+    assert_eq!(policy.image_space(), Some(&images));
+
+    let mut cache = PixelCache::default();
+    let (mut obs, _) = env.reset(Some(5)).unwrap();
+    for step in 0..5 {
+        let image = env.image().unwrap().to_vec();
+        let want = actor.forward(&obs, &image, 1, &mut cache).unwrap();
+        let got = policy.act_with_images(&obs, Some(&image), true).unwrap();
+        assert_eq!(got, want, "step {step}");
+        obs = env.step(&got).unwrap().obs;
+    }
+    let err = policy.act(&obs, true).err().unwrap().to_string();
+    assert!(
+        err.contains("scene_rgb 24×24×3") && err.contains("act_with_images"),
+        "{err}"
+    );
+    let err = policy
+        .act_with_images(&obs, None, true)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("none were given"), "{err}");
+    let err = (policy.act_with_images(&obs, Some(&[0; 10]), true))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("10 image bytes") && err.contains("1728 bytes"),
+        "{err}"
+    );
+
+    // A camera policy's weights without the state's standardisation are refused by name.
+    let mut weights = load_tensors(&dir.path().join("model.safetensors")).unwrap();
+    weights.remove("state.mean");
+    let err = Policy::from_parts(meta, &weights)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("state.mean"), "{err}");
 }

@@ -433,7 +433,7 @@ fn the_driver_runs_the_pick_and_place_and_sorting_tasks() {
         assert_eq!(policy.env_id(), id);
         let table = fairgrasp_rl::model::env_table(policy.env_config()).unwrap();
         let again = fairgrasp_rl::train::evaluate(
-            &mut |obs| policy.act(obs, true),
+            &mut |obs, _| policy.act(obs, true),
             id,
             &table,
             1,

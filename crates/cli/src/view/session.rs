@@ -275,7 +275,7 @@ impl Session {
             Mode::Policy => {
                 let policy = self.policy.as_mut().context("no model loaded")?;
                 // Policies act in [-1, 1]; map to the env's bounds like RescaleAction.
-                let a = policy.act(&self.obs, true)?;
+                let a = policy.act_with_images(&self.obs, self.env.image(), true)?;
                 a.iter()
                     .zip(space.low.iter().zip(&space.high))
                     .map(|(a, (lo, hi))| lo + (a.clamp(-1.0, 1.0) + 1.0) * 0.5 * (hi - lo))

@@ -115,6 +115,7 @@ fn model(case: &Case, seed: u64) -> (ModelMeta, TensorMap) {
         train_seed: 1,
         n_envs: 1,
         privileged_dim: 0,
+        pixel_actor: None,
     };
     (meta, weights)
 }
@@ -490,4 +491,150 @@ fn the_default_onnx_path_is_in_the_model_directory_and_bad_models_are_named() {
         err.contains("pytorch") && err.contains("onnx or safetensors"),
         "{err}"
     );
+}
+
+/// A camera policy's ONNX graph takes the state and one `u8` input per camera (the keys of the
+/// environment's `Dict` observation) and gives the actions of `Policy::act_with_images`.
+#[test]
+fn onnx_camera_policy_on_state_and_images_matches_our_inference() {
+    use fairgrasp_deploy::export::onnx::STATE_INPUT;
+    use fairgrasp_rl::model::PixelActorMeta;
+    use fairgrasp_rl::policies::pixel_actor::{PixelActor, PixelActorConfig};
+
+    let env_config = serde_json::json!({
+        "camera": { "mode": "rgbd+state", "width": 32, "height": 32, "wrist": { "enabled": true } }
+    });
+    let table = env_table(&env_config).unwrap();
+    let mut env = RescaleAction::new(registry::make("FaArmGrasp-v0", &table).unwrap()).unwrap();
+    let space = env.image_space().unwrap().clone();
+    assert!(space.views.len() >= 2, "{}", space.describe());
+    let (state_dim, act_dim) = (env.observation_space().dim(), env.action_space().dim());
+    let actor_config = PixelActorConfig {
+        features: 16,
+        net_arch: vec![32],
+        ..PixelActorConfig::default()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut actor = PixelActor::new(&actor_config, &space, state_dim, act_dim, &mut rng).unwrap();
+    // Observations of real episodes under random actions.
+    let (mut states, mut images) = (Vec::new(), Vec::new());
+    let (mut obs, _) = env.reset(Some(1)).unwrap();
+    for _ in 0..40 {
+        states.extend_from_slice(&obs);
+        images.extend_from_slice(env.image().unwrap());
+        let action: Vec<f32> = (0..act_dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let step = env.step(&action).unwrap();
+        obs = if step.terminated || step.truncated {
+            env.reset(None).unwrap().0
+        } else {
+            step.obs
+        };
+    }
+    let n = states.len() / state_dim;
+    actor.fit_state_scale(&states);
+    // Output weights 300 times the initial scale, so that actions leave [-1, 1].
+    let mut weights = actor.weights();
+    let last = format!("head.{}.weight", actor_config.net_arch.len());
+    weights.insert(last.clone(), (weights[&last].clone() * 300.0).unwrap());
+    let meta = ModelMeta {
+        format_version: FORMAT_VERSION,
+        algo: AlgoConfig::default(),
+        obs_dim: state_dim,
+        act_dim,
+        env_id: "FaArmGrasp-v0".into(),
+        env: env_config,
+        normalization: None,
+        num_timesteps: 0,
+        train_seed: 0,
+        n_envs: 1,
+        privileged_dim: 0,
+        pixel_actor: Some(PixelActorMeta {
+            actor: actor_config,
+            images: space.clone(),
+        }),
+    };
+    let mut policy = Policy::from_parts(meta, &weights).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("policy.onnx");
+    export_policy(&policy, Format::Onnx, &path).unwrap();
+
+    let model = tract_onnx::onnx()
+        .model_for_path(&path)
+        .unwrap()
+        .into_optimized()
+        .unwrap()
+        .into_runnable()
+        .unwrap();
+    let proto = tract_onnx::onnx().proto_model_for_path(&path).unwrap();
+    let inputs: Vec<String> = (proto.graph.as_ref().unwrap().input.iter())
+        .map(|i| i.name.clone())
+        .collect();
+    let mut names = vec![STATE_INPUT.to_string()];
+    names.extend(space.views.iter().map(|v| v.name.clone()));
+    assert_eq!(inputs, names);
+    let run = |rows: usize| {
+        let mut feed = vec![
+            TractTensor::from_shape(&[rows, state_dim], &states[..rows * state_dim])
+                .unwrap()
+                .into_tvalue(),
+        ];
+        for (v, view) in space.views.iter().enumerate() {
+            let range = space.range(v);
+            let bytes: Vec<u8> = (images.chunks_exact(space.len()).take(rows))
+                .flat_map(|obs| obs[range.clone()].iter().copied())
+                .collect();
+            let shape = [
+                rows,
+                view.height as usize,
+                view.width as usize,
+                view.channels as usize,
+            ];
+            feed.push(
+                TractTensor::from_shape(&shape, &bytes)
+                    .unwrap()
+                    .into_tvalue(),
+            );
+        }
+        let outputs = model.run(feed.into()).unwrap();
+        let values = |i: usize| {
+            let view = outputs[i].to_plain_array_view::<f32>().unwrap();
+            view.iter().copied().collect::<Vec<f32>>()
+        };
+        (values(0), values(1))
+    };
+    let (action, env_action) = run(n);
+    let (mut want, mut want_env) = (Vec::new(), Vec::new());
+    for (state, image) in states.chunks(state_dim).zip(images.chunks(space.len())) {
+        let mut a = policy.act_with_images(state, Some(image), true).unwrap();
+        want.extend_from_slice(&a);
+        env.action_space().clip(&mut a);
+        want_env.extend(env.to_inner_action(&a).unwrap());
+    }
+    let diff = max_abs_diff(&action, &want);
+    let env_diff = max_abs_diff(&env_action, &want_env);
+    eprintln!(
+        "camera policy ({}): max |diff| action {diff:e}, env_action {env_diff:e}",
+        space.describe()
+    );
+    // The convolutions sum in another order than our kernels: not bit for bit.
+    assert!(diff <= 1e-4, "action differs by {diff}");
+    assert!(env_diff <= 1e-4, "env_action differs by {env_diff}");
+    let beyond = want.iter().filter(|a| a.abs() > 1.0).count();
+    assert!(
+        beyond > want.len() / 20,
+        "only {beyond} actions beyond [-1, 1]"
+    );
+    let (one, _) = run(1);
+    assert!(max_abs_diff(&one, &want[..act_dim]) <= 1e-4);
+
+    // Its safetensors export is refused with the reason.
+    let err = export_policy(
+        &policy,
+        Format::Safetensors,
+        &dir.path().join("p.safetensors"),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(err.contains("ONNX only"), "{err}");
 }

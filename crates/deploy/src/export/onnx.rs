@@ -1,10 +1,11 @@
-//! The policy as an ONNX graph (opset 13): raw observations in, the deterministic action and
-//! the environment's action out. See docs/export.md for the graph.
+//! The policy as an ONNX graph (opset 13): raw observations in (a camera policy: the state and
+//! each camera's image), the deterministic action and the environment's action out. See
+//! docs/export.md for the graph.
 //!
 //! The protobuf messages come from `onnx-protobuf` (types pregenerated from onnx.proto, so no
 //! `protoc` is needed to build); only the graph's layout is written here.
 
-use crate::export::spec::{Head, PolicySpec};
+use crate::export::spec::{CameraInputs, Conv, Dense, Head, PolicySpec};
 use fairgrasp_rl::nn::Activation;
 use onnx_protobuf::attribute_proto::AttributeType;
 use onnx_protobuf::tensor_proto::DataType;
@@ -21,6 +22,10 @@ pub const OPSET: i64 = 13;
 const IR_VERSION: i64 = 7;
 /// The graph's input: raw observations, `batch × obs_dim` float32.
 pub const INPUT: &str = "observation";
+/// A camera policy's state input (`batch × obs_dim` float32) beside one `u8` input per camera
+/// named as the camera's image (`scene_rgb`: `batch × height × width × channels`): the keys of
+/// the environment's Gymnasium `Dict` observation.
+pub const STATE_INPUT: &str = "state";
 /// The deterministic action, unclipped: what `Policy::act(obs, true)` returns.
 pub const OUTPUT_ACTION: &str = "action";
 /// The action as the environment receives it: clipped to `[-1, 1]`, then mapped onto the
@@ -37,8 +42,9 @@ pub fn onnx_bytes(spec: &PolicySpec) -> Result<Vec<u8>, String> {
 /// The ONNX model of `spec`, with its metadata (see [`metadata`]).
 pub fn model(spec: &PolicySpec) -> ModelProto {
     let mut builder = Builder::default();
-    let features = match &spec.normalization {
-        Some(n) => {
+    let features = match (&spec.camera, &spec.normalization) {
+        (Some(camera), _) => camera_features(&mut builder, camera),
+        (None, Some(n)) => {
             // In f64, so the result is bit for bit that of `VecNormalizeState::normalize_obs`.
             let obs = builder.cast(INPUT, DataType::DOUBLE);
             builder.f64_constant("obs_norm.mean", &[spec.obs_dim], &n.mean);
@@ -50,17 +56,11 @@ pub fn model(spec: &PolicySpec) -> ModelProto {
             let clipped = builder.clamp(&scaled, "obs_norm.clip_low", "obs_norm.clip_high");
             builder.cast(&clipped, DataType::FLOAT)
         }
-        None => INPUT.to_string(),
+        (None, None) => INPUT.to_string(),
     };
     let mut x = features;
     for (i, layer) in spec.layers.iter().enumerate() {
-        let weight = format!("{}.weight", layer.name);
-        let bias = format!("{}.bias", layer.name);
-        builder.f32_constant(&weight, &[layer.outputs, layer.inputs], &layer.weight);
-        builder.f32_constant(&bias, &[layer.outputs], &layer.bias);
-        let mut gemm = node("Gemm", &[&x, &weight, &bias], &builder.fresh());
-        gemm.attribute.push(int_attribute("transB", 1));
-        x = builder.push(gemm);
+        x = builder.dense(&x, layer);
         if i + 1 < spec.layers.len() {
             x = match spec.activation {
                 Activation::Tanh => builder.op("Tanh", &[&x]),
@@ -80,23 +80,18 @@ pub fn model(spec: &PolicySpec) -> ModelProto {
         name: "fairgrasp_policy".into(),
         node: builder.nodes,
         initializer: builder.constants,
-        input: vec![tensor_value(
-            INPUT,
-            DataType::FLOAT,
-            spec.obs_dim as i64,
-            "raw observations, one per row (normalisation is in the graph)",
-        )],
+        input: inputs(spec),
         output: vec![
             tensor_value(
                 OUTPUT_ACTION,
                 DataType::FLOAT,
-                act_dim,
+                &[act_dim],
                 "deterministic policy action, unclipped (Policy::act(obs, true))",
             ),
             tensor_value(
                 OUTPUT_ENV_ACTION,
                 DataType::FLOAT,
-                act_dim,
+                &[act_dim],
                 "the action the environment receives: clipped to [-1, 1], mapped onto its action box",
             ),
         ],
@@ -127,6 +122,92 @@ pub fn model(spec: &PolicySpec) -> ModelProto {
             .collect(),
         ..Default::default()
     }
+}
+
+/// The graph's inputs: the observation vector, or a camera policy's state and images.
+fn inputs(spec: &PolicySpec) -> Vec<ValueInfoProto> {
+    let Some(camera) = &spec.camera else {
+        return vec![tensor_value(
+            INPUT,
+            DataType::FLOAT,
+            &[spec.obs_dim as i64],
+            "raw observations, one per row (normalisation is in the graph)",
+        )];
+    };
+    let mut inputs = vec![tensor_value(
+        STATE_INPUT,
+        DataType::FLOAT,
+        &[spec.obs_dim as i64],
+        "the arm's readings, one observation per row (standardised in the graph)",
+    )];
+    for e in &camera.encoders {
+        let v = &e.view;
+        inputs.push(tensor_value(
+            &v.name,
+            DataType::UINT8,
+            &[v.height as i64, v.width as i64, v.channels as i64],
+            "the camera's image, height × width × channels, as the environment renders it",
+        ));
+    }
+    inputs
+}
+
+/// A camera policy's head input: each camera's features (its `u8` image to [0, 1], channel-first
+/// for ONNX's `Conv`, the convolutions with ReLU, back to channel-last, flattened, the dense
+/// layer with ReLU), then the standardised state.
+fn camera_features(builder: &mut Builder, camera: &CameraInputs) -> String {
+    builder.f32_constant("pixel.scale", &[], &[255.0]);
+    let mut parts = Vec::new();
+    for e in &camera.encoders {
+        let pixels = builder.cast(&e.view.name, DataType::FLOAT);
+        let unit = builder.op("Div", &[&pixels, "pixel.scale"]);
+        let mut x = builder.transpose(&unit, &[0, 3, 1, 2]);
+        for c in &e.convs {
+            let (weight, bias) = (format!("{}.weight", c.name), format!("{}.bias", c.name));
+            let dims = [c.filters, c.channels, c.kernel, c.kernel];
+            builder.f32_constant(&weight, &dims, &channel_first(c));
+            builder.f32_constant(&bias, &[c.filters], &c.bias);
+            let mut conv = node("Conv", &[&x, &weight, &bias], &builder.fresh());
+            conv.attribute
+                .push(ints_attribute("kernel_shape", &[c.kernel, c.kernel]));
+            conv.attribute
+                .push(ints_attribute("strides", &[c.stride, c.stride]));
+            x = builder.push(conv);
+            x = builder.op("Relu", &[&x]);
+        }
+        let last = builder.transpose(&x, &[0, 2, 3, 1]);
+        let mut flatten = node("Flatten", &[&last], &builder.fresh());
+        flatten.attribute.push(int_attribute("axis", 1));
+        let flat = builder.push(flatten);
+        let features = builder.dense(&flat, &e.fc);
+        parts.push(builder.op("Relu", &[&features]));
+    }
+    let n = camera.state_mean.len();
+    builder.f32_constant("state.mean", &[n], &camera.state_mean);
+    builder.f32_constant("state.std", &[n], &camera.state_std);
+    let centred = builder.op("Sub", &[STATE_INPUT, "state.mean"]);
+    parts.push(builder.op("Div", &[&centred, "state.std"]));
+    let refs: Vec<&str> = parts.iter().map(String::as_str).collect();
+    let mut concat = node("Concat", &refs, &builder.fresh());
+    concat.attribute.push(int_attribute("axis", 1));
+    builder.push(concat)
+}
+
+/// A convolution's filters as ONNX lays them out: `filters × channels × kernel × kernel`.
+fn channel_first(c: &Conv) -> Vec<f32> {
+    let k = c.kernel;
+    let mut out = vec![0.0; c.weight.len()];
+    for f in 0..c.filters {
+        for y in 0..k {
+            for x in 0..k {
+                for ch in 0..c.channels {
+                    out[((f * c.channels + ch) * k + y) * k + x] =
+                        c.weight[((f * k + y) * k + x) * c.channels + ch];
+                }
+            }
+        }
+    }
+    out
 }
 
 /// The model's metadata properties: `env_id`, `env_config` (JSON), `algo`, `obs_dim`,
@@ -203,6 +284,23 @@ impl Builder {
         self.push(node(op, inputs, &out))
     }
 
+    /// `x Wᵀ + b` (a `Gemm`), its weight and bias added as constants.
+    fn dense(&mut self, x: &str, layer: &Dense) -> String {
+        let weight = format!("{}.weight", layer.name);
+        let bias = format!("{}.bias", layer.name);
+        self.f32_constant(&weight, &[layer.outputs, layer.inputs], &layer.weight);
+        self.f32_constant(&bias, &[layer.outputs], &layer.bias);
+        let mut gemm = node("Gemm", &[x, &weight, &bias], &self.fresh());
+        gemm.attribute.push(int_attribute("transB", 1));
+        self.push(gemm)
+    }
+
+    fn transpose(&mut self, input: &str, perm: &[usize]) -> String {
+        let mut t = node("Transpose", &[input], &self.fresh());
+        t.attribute.push(ints_attribute("perm", perm));
+        self.push(t)
+    }
+
     fn cast(&mut self, input: &str, to: DataType) -> String {
         let mut cast = node("Cast", &[input], &self.fresh());
         cast.attribute.push(int_attribute("to", to as i64));
@@ -254,15 +352,21 @@ fn int_attribute(name: &str, value: i64) -> AttributeProto {
     }
 }
 
-/// A `batch × width` tensor of `elem`, the batch size left free.
-fn tensor_value(name: &str, elem: DataType, width: i64, doc: &str) -> ValueInfoProto {
-    let dims = [
-        dimension::Value::DimParam("batch".into()),
-        dimension::Value::DimValue(width),
-    ];
+fn ints_attribute(name: &str, values: &[usize]) -> AttributeProto {
+    AttributeProto {
+        name: name.into(),
+        type_: EnumOrUnknown::new(AttributeType::INTS),
+        ints: values.iter().map(|&v| v as i64).collect(),
+        ..Default::default()
+    }
+}
+
+/// A `batch × dims…` tensor of `elem`, the batch size left free.
+fn tensor_value(name: &str, elem: DataType, dims: &[i64], doc: &str) -> ValueInfoProto {
+    let dims = std::iter::once(dimension::Value::DimParam("batch".into()))
+        .chain(dims.iter().map(|&d| dimension::Value::DimValue(d)));
     let shape = TensorShapeProto {
         dim: dims
-            .into_iter()
             .map(|value| Dimension {
                 value: Some(value),
                 ..Default::default()

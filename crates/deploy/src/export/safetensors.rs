@@ -30,6 +30,13 @@ pub fn layer_name(i: usize) -> String {
 
 /// The serialised safetensors file of `spec`.
 pub fn safetensors_bytes(spec: &PolicySpec) -> Result<Vec<u8>, String> {
+    if spec.camera.is_some() {
+        return Err(
+            "a camera policy exports as ONNX only (--format onnx); its weights are \
+                    model.safetensors beside model.json"
+                .into(),
+        );
+    }
     let mut tensors: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
     let mut add = |name: String, dtype, shape: Vec<usize>, bytes: Vec<u8>| {
         tensors.push((name, dtype, shape, bytes));

@@ -5,11 +5,13 @@
 use crate::error::{DeployError, Result};
 use candle_core::Tensor;
 use fairgrasp_env::Env;
+use fairgrasp_env::spaces::ImageView;
 use fairgrasp_env::wrappers::RescaleAction;
 use fairgrasp_rl::Policy;
 use fairgrasp_rl::nn::Activation;
 use fairgrasp_rl::policies::FeaturesConfig;
 pub use fairgrasp_rl::policies::Head;
+use fairgrasp_rl::policies::pixel_actor::PixelActor;
 
 /// `clip((obs − mean) / sqrt(var + epsilon), ±clip)`, computed in f64 as
 /// [`fairgrasp_env::wrappers::VecNormalizeState::normalize_obs`] does.
@@ -47,6 +49,51 @@ pub struct Dense {
     pub bias: Vec<f32>,
 }
 
+/// One convolution of a camera's encoder: `filters` kernels of `kernel × kernel` over
+/// `channels`, stride `stride`, no padding, ReLU after.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Conv {
+    /// The layer's name in `model.safetensors` (`enc0.conv1`).
+    pub name: String,
+    /// Input channels.
+    pub channels: usize,
+    /// Output channels.
+    pub filters: usize,
+    /// Kernel side.
+    pub kernel: usize,
+    /// Stride.
+    pub stride: usize,
+    /// `filters × kernel × kernel × channels`, row-major: channel-last patches, as fairgrasp's
+    /// kernels read them (ONNX's `Conv` takes `filters × channels × kernel × kernel`).
+    pub weight: Vec<f32>,
+    /// `filters` values.
+    pub bias: Vec<f32>,
+}
+
+/// One camera's encoder: its `u8` image (channel-last) scaled to [0, 1], the convolutions,
+/// then a dense layer with ReLU over the last one's output flattened channel-last.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Encoder {
+    /// The camera's image: its name is the input's.
+    pub view: ImageView,
+    /// Input side first.
+    pub convs: Vec<Conv>,
+    /// The dense layer to the encoder's features.
+    pub fc: Dense,
+}
+
+/// What a camera policy reads besides the state vector, and how: the head's input is every
+/// encoder's features in order, then the state standardised (`(state − mean) / std`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraInputs {
+    /// One per camera, in the order of the head's input.
+    pub encoders: Vec<Encoder>,
+    /// Subtracted from each state value.
+    pub state_mean: Vec<f32>,
+    /// What the centred state values are divided by.
+    pub state_std: Vec<f32>,
+}
+
 /// The environment's own action box, onto which `[-1, 1]` is mapped (the trainer's
 /// [`RescaleAction`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -64,7 +111,7 @@ pub struct PolicySpec {
     pub env_id: String,
     /// The environment's configuration, as the model saved it.
     pub env_config: serde_json::Value,
-    /// The name of the algorithm that trained it.
+    /// How it learnt: the algorithm's name (`ppo`), or `distilled from a ppo teacher`.
     pub algo: String,
     /// Observation width.
     pub obs_dim: usize,
@@ -74,7 +121,11 @@ pub struct PolicySpec {
     pub num_timesteps: u64,
     /// `None` when the model acts on raw observations.
     pub normalization: Option<ObsNormalization>,
-    /// In order from the observation; an activation follows every layer but the last.
+    /// A camera policy's images and encoders (`None`: the policy reads the observation vector
+    /// alone).
+    pub camera: Option<CameraInputs>,
+    /// In order from the observation (a camera policy: from the encoders' features and the
+    /// standardised state); an activation follows every layer but the last.
     pub layers: Vec<Dense>,
     /// The activation after each hidden layer.
     pub activation: Activation,
@@ -93,7 +144,32 @@ impl PolicySpec {
     pub fn from_policy(policy: &Policy) -> Result<Self> {
         let meta = policy.meta();
         let fail = |message: String| DeployError::config(model_name(policy), message);
-        let actor = policy.actor_description();
+        let (env_action, action_layout) = environment_actions(policy).map_err(fail)?;
+        let mut spec = Self {
+            env_id: meta.env_id.clone(),
+            env_config: meta.env.clone(),
+            algo: meta.algo.algo().to_string(),
+            obs_dim: meta.obs_dim,
+            act_dim: meta.act_dim,
+            num_timesteps: meta.num_timesteps,
+            normalization: None,
+            camera: None,
+            layers: Vec::new(),
+            activation: Activation::Relu,
+            head: Head::Mean,
+            env_action,
+            action_layout,
+        };
+        if let Some(actor) = policy.pixel_actor() {
+            let (camera, layers) = camera_policy(actor).map_err(fail)?;
+            check_chain(&layers, layers[0].inputs, meta.act_dim).map_err(fail)?;
+            (spec.camera, spec.layers) = (Some(camera), layers);
+            spec.algo = meta.trained_by();
+            return Ok(spec);
+        }
+        let actor = policy
+            .actor_description()
+            .ok_or_else(|| fail("the model's actor cannot be exported".into()))?;
         let (prefix, net_arch, activation, head) = (
             actor.prefix,
             &actor.net.net_arch,
@@ -143,22 +219,70 @@ impl PolicySpec {
                 epsilon: n.config.epsilon,
                 clip: n.config.clip_obs as f64,
             });
-        let (env_action, action_layout) = environment_actions(policy).map_err(fail)?;
-        Ok(Self {
-            env_id: meta.env_id.clone(),
-            env_config: meta.env.clone(),
-            algo: meta.algo.algo().to_string(),
-            obs_dim: meta.obs_dim,
-            act_dim: meta.act_dim,
-            num_timesteps: meta.num_timesteps,
-            normalization,
-            layers,
-            activation,
-            head,
-            env_action,
-            action_layout,
-        })
+        spec.normalization = normalization;
+        (spec.layers, spec.activation, spec.head) = (layers, activation, head);
+        Ok(spec)
     }
+}
+
+/// A camera policy's encoders and standardisation, and its head's layers.
+fn camera_policy(actor: &PixelActor) -> Result<(CameraInputs, Vec<Dense>), String> {
+    let tensors = actor.weights();
+    let get = |name: &str| -> Result<(Vec<usize>, Vec<f32>), String> {
+        let t = (tensors.get(name)).ok_or_else(|| format!("the camera policy has no `{name}`"))?;
+        Ok((
+            t.dims().to_vec(),
+            values(t).map_err(|e| format!("{name}: {e}"))?,
+        ))
+    };
+    let dense = |name: String| -> Result<Dense, String> {
+        let (dims, weight) = get(&format!("{name}.weight"))?;
+        let (_, bias) = get(&format!("{name}.bias"))?;
+        Ok(Dense {
+            name,
+            inputs: dims[1],
+            outputs: dims[0],
+            weight,
+            bias,
+        })
+    };
+    let mut encoders = Vec::new();
+    for (v, (encoder, view)) in actor
+        .encoders()
+        .iter()
+        .zip(&actor.images().views)
+        .enumerate()
+    {
+        let mut convs = Vec::new();
+        for (i, shape) in encoder.convs().iter().enumerate() {
+            let name = format!("enc{v}.conv{i}");
+            convs.push(Conv {
+                weight: get(&format!("{name}.weight"))?.1,
+                bias: get(&format!("{name}.bias"))?.1,
+                name,
+                channels: shape.channels,
+                filters: shape.filters,
+                kernel: shape.kernel,
+                stride: shape.stride,
+            });
+        }
+        let fc = dense(format!("enc{v}.fc"))?;
+        encoders.push(Encoder {
+            view: view.clone(),
+            convs,
+            fc,
+        });
+    }
+    let head = (0..=actor.config().net_arch.len())
+        .map(|l| dense(format!("head.{l}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (mean, std) = actor.state_scale();
+    let camera = CameraInputs {
+        encoders,
+        state_mean: mean.to_vec(),
+        state_std: std.to_vec(),
+    };
+    Ok((camera, head))
 }
 
 /// How errors name the policy: its directory, or `policy` for one built in memory.

@@ -51,7 +51,7 @@ pub fn run_grid<F, A>(
 ) -> Result<Vec<CellResult>>
 where
     F: Fn() -> Result<A> + Sync,
-    A: FnMut(&[f32]) -> fairgrasp_rl::error::Result<Vec<f32>>,
+    A: FnMut(&[f32], Option<&[u8]>) -> fairgrasp_rl::error::Result<Vec<f32>>,
 {
     grid.validate()
         .map_err(|e| DeployError::config("the robustness grid", e))?;
@@ -121,7 +121,7 @@ pub fn evaluate_model(
     let base = env_table(policy.env_config()).map_err(|e| named(&e))?;
     let make_actor = || -> Result<_> {
         let mut policy = Policy::from_parts(meta.clone(), &weights).map_err(|e| named(&e))?;
-        Ok(move |obs: &[f32]| policy.act(obs, true))
+        Ok(move |obs: &[f32], images: Option<&[u8]>| policy.act_with_images(obs, images, true))
     };
     let cells =
         run_grid(make_actor, &meta.env_id, &base, grid, options, on_done).map_err(|e| named(&e))?;

@@ -15,6 +15,7 @@ pub mod stage;
 use crate::error::{Result, RlError};
 use crate::nn::adam::Adam;
 use crate::policies::pixel_actor::{PixelActor, PixelActorConfig, PixelCache};
+use crate::policy::Policy;
 use fairgrasp_env::spaces::ImageView;
 use fairgrasp_env::{Env, VecEnv, VectorEnv};
 use rand::seq::SliceRandom;
@@ -364,15 +365,14 @@ pub fn distill<E: Env>(
     Ok(student)
 }
 
-/// Runs `student` alone (its actions, no teacher) for `episodes` episodes on `env`, episode
-/// `e` seeded `seed + e`: the successes.
+/// Runs a camera policy alone (its actions, no teacher) for `episodes` episodes on `env`,
+/// episode `e` seeded `seed + e`: the successes.
 pub fn evaluate_student<E: Env>(
-    student: &PixelActor,
+    student: &mut Policy,
     env: &mut E,
     episodes: u32,
     seed: u64,
 ) -> Result<u32> {
-    let mut cache = PixelCache::default();
     let mut successes = 0;
     for e in 0..episodes as u64 {
         let (mut obs, _) = env.reset(Some(seed + e))?;
@@ -380,7 +380,7 @@ pub fn evaluate_student<E: Env>(
             let image = env.image().ok_or_else(|| {
                 RlError::Other("the evaluation env gives no camera images".into())
             })?;
-            let action = student.forward(&obs, image, 1, &mut cache)?;
+            let action = student.act_with_images(&obs, Some(image), true)?;
             let step = env.step(&action)?;
             if step.terminated || step.truncated {
                 successes += u32::from(step.info.success);

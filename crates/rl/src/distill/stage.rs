@@ -2,10 +2,9 @@
 //! evaluated out (what `fairgrasp train` runs after training when its config has `[distill]`,
 //! and `fairgrasp distill` runs on its own).
 
-use crate::algorithm::TensorMap;
 use crate::distill::{DistillConfig, RoundReport, distill, evaluate_student};
 use crate::error::{Result, RlError};
-use crate::model::save_tensors;
+use crate::model::{FORMAT_VERSION, ModelMeta, PixelActorMeta, save_model};
 use crate::policies::pixel_actor::PixelActor;
 use crate::policy::Policy;
 use crate::train::HELD_OUT_SEED_BASE;
@@ -49,16 +48,17 @@ pub fn student_env(teacher: &Policy, config: &DistillConfig) -> Result<toml::Tab
     Ok(table)
 }
 
-/// Distils the model at `teacher_dir` into a camera policy saved in `student_dir`
-/// (`student.safetensors`, `summary.json`), then evaluates it alone on `config.eval_episodes`
-/// held-out episodes. `on_round` sees each round. Returns the summary and the student.
+/// Distils the model at `teacher_dir` into a camera policy saved as a model in `student_dir`
+/// (`model.safetensors`, `model.json`, which [`Policy::load`] reads), then evaluates the saved
+/// student alone on `config.eval_episodes` held-out episodes (`summary.json`). `on_round` sees
+/// each round. Returns the summary and the student as loaded.
 pub fn run_stage(
     teacher_dir: &Path,
     student_dir: &Path,
     config: &DistillConfig,
     seed: u64,
     on_round: &mut dyn FnMut(&RoundReport, &PixelActor) -> ControlFlow<()>,
-) -> Result<(StudentSummary, PixelActor)> {
+) -> Result<(StudentSummary, Policy)> {
     config.validate()?;
     let started = Instant::now();
     let mut teacher = Policy::load(teacher_dir)?;
@@ -78,29 +78,45 @@ pub fn run_stage(
     let student = distill(&mut label, teacher_dim, &mut envs, config, seed, &mut watch)?;
     envs.close();
     let distill_seconds = started.elapsed().as_secs_f64();
-    let io = |path: &Path, e: std::io::Error| RlError::Other(format!("{}: {e}", path.display()));
-    std::fs::create_dir_all(student_dir).map_err(|e| io(student_dir, e))?;
-    let weights: TensorMap = {
-        let data = student.varmap().data().lock().expect("varmap lock");
-        (data.iter())
-            .map(|(k, v)| (k.clone(), v.as_tensor().clone()))
-            .collect()
+    let meta = ModelMeta {
+        format_version: FORMAT_VERSION,
+        algo: teacher.meta().algo.clone(),
+        obs_dim: student.state_dim(),
+        act_dim: student.act_dim(),
+        env_id: env_id.clone(),
+        env: serde_json::to_value(&table).map_err(|e| RlError::Other(e.to_string()))?,
+        normalization: None,
+        num_timesteps: teacher.meta().num_timesteps,
+        train_seed: seed,
+        n_envs: config.n_envs,
+        privileged_dim: 0,
+        pixel_actor: Some(PixelActorMeta {
+            actor: config.actor.clone(),
+            images: student.images().clone(),
+        }),
     };
-    save_tensors(&student_dir.join("student.safetensors"), &weights)?;
+    save_model(student_dir, &student.weights(), &meta)?;
+    let mut student = Policy::load(student_dir)?;
     let started = Instant::now();
     let mut env = RescaleAction::new(registry::make(&env_id, &table)?)?;
-    let successes = evaluate_student(&student, &mut env, config.eval_episodes, HELD_OUT_SEED_BASE)?;
+    let successes = evaluate_student(
+        &mut student,
+        &mut env,
+        config.eval_episodes,
+        HELD_OUT_SEED_BASE,
+    )?;
     env.close();
     let summary = StudentSummary {
         episodes: config.eval_episodes,
         successes,
         distill_seconds,
         eval_seconds: started.elapsed().as_secs_f64(),
-        parameters: student.parameter_count(),
+        parameters: student.pixel_actor().map_or(0, PixelActor::parameter_count),
         samples,
     };
     let json = serde_json::to_string_pretty(&summary).map_err(|e| RlError::Other(e.to_string()))?;
     let path = student_dir.join("summary.json");
-    atomic::write(&path, json.as_bytes()).map_err(|e| io(&path, e))?;
+    atomic::write(&path, json.as_bytes())
+        .map_err(|e| RlError::Other(format!("{}: {e}", path.display())))?;
     Ok((summary, student))
 }

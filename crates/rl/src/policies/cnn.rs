@@ -110,6 +110,11 @@ impl CnnEncoder {
         self.features
     }
 
+    /// Its convolutions, input side first.
+    pub fn convs(&self) -> &[ConvShape] {
+        &self.convs
+    }
+
     /// Values of the last convolution's output (the linear layer's input).
     pub fn flat(&self) -> usize {
         self.convs.last().map_or(0, ConvShape::out_len)

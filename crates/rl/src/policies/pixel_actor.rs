@@ -4,12 +4,14 @@
 //! and backward passes run on the written-out kernels; the weights live in a [`VarMap`] so that
 //! they save as every model's do.
 
+use crate::algorithm::TensorMap;
 use crate::kernels::dense::{linear_backward, linear_forward, relu, relu_backward};
 use crate::kernels::mlp::VarValues;
 use crate::nn::adam::Adam;
 use crate::policies::cnn::{CnnArch, CnnCache, CnnEncoder};
+use candle_core::Var;
 use candle_core::{DType, Device, Tensor};
-use candle_nn::{Init, VarMap};
+use candle_nn::VarMap;
 use fairgrasp_env::spaces::ImageSpace;
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
@@ -35,6 +37,10 @@ impl Default for PixelActorConfig {
         }
     }
 }
+
+/// The saved names of the state's standardisation.
+const STATE_MEAN: &str = "state.mean";
+const STATE_STD: &str = "state.std";
 
 /// Reused buffers of one batch's passes.
 #[derive(Default)]
@@ -76,6 +82,77 @@ impl PixelActor {
         act_dim: usize,
         rng: &mut dyn RngCore,
     ) -> Result<Self, String> {
+        Self::build(config, images, state_dim, act_dim, |name, shape, last| {
+            let n: usize = shape.iter().product();
+            Ok(if name.ends_with("bias") {
+                vec![0.0; n]
+            } else {
+                let fan_in: usize = shape[1..].iter().product();
+                let scale = if last { 0.01 } else { 1.0 };
+                let bound = scale * (6.0 / fan_in as f32).sqrt();
+                (0..n).map(|_| rng.random_range(-bound..bound)).collect()
+            })
+        })
+    }
+
+    /// A pixel actor of this shape with saved `weights` (what [`Self::weights`] gave): every
+    /// tensor checked, a missing, extra or mis-shaped one is an error naming it.
+    pub fn from_weights(
+        config: &PixelActorConfig,
+        images: &ImageSpace,
+        state_dim: usize,
+        act_dim: usize,
+        weights: &TensorMap,
+    ) -> Result<Self, String> {
+        let read = |name: &str, shape: &[usize]| -> Result<Vec<f32>, String> {
+            let t = weights
+                .get(name)
+                .ok_or_else(|| format!("the camera policy has no tensor `{name}`"))?;
+            if t.dims() != shape {
+                return Err(format!(
+                    "tensor `{name}` has shape {:?}, the camera policy needs {shape:?}",
+                    t.dims()
+                ));
+            }
+            (t.to_dtype(DType::F32)
+                .and_then(|t| t.flatten_all()?.to_vec1()))
+            .map_err(|e| format!("tensor `{name}`: {e}"))
+        };
+        let mut actor = Self::build(config, images, state_dim, act_dim, |name, shape, _| {
+            read(name, shape)
+        })?;
+        actor.state_mean = read(STATE_MEAN, &[state_dim])?;
+        actor.state_std = read(STATE_STD, &[state_dim])?;
+        if let Some(i) = actor
+            .state_std
+            .iter()
+            .position(|s| !(s.is_finite() && *s > 0.0))
+        {
+            return Err(format!(
+                "tensor `{STATE_STD}`: value {i} is {} (standard deviations must be positive)",
+                actor.state_std[i]
+            ));
+        }
+        if let Some(extra) = (weights.keys())
+            .find(|k| !actor.names.contains(k) && *k != STATE_MEAN && *k != STATE_STD)
+        {
+            return Err(format!(
+                "tensor `{extra}` is not part of a {} camera policy",
+                config.encoder.name()
+            ));
+        }
+        Ok(actor)
+    }
+
+    /// The layers, their parameters named and shaped, each filled by `value(name, shape,
+    /// is_output_weight)`.
+    fn build(
+        config: &PixelActorConfig,
+        images: &ImageSpace,
+        state_dim: usize,
+        act_dim: usize,
+        mut value: impl FnMut(&str, &[usize], bool) -> Result<Vec<f32>, String>,
+    ) -> Result<Self, String> {
         if images.views.is_empty() {
             return Err(
                 "a pixel actor needs camera images (camera.mode = \"rgb+state\", …)".into(),
@@ -100,32 +177,15 @@ impl PixelActor {
         }
         let varmap = VarMap::new();
         let last = shapes.len() - 2;
-        for (i, (name, shape)) in shapes.iter().enumerate() {
-            let n: usize = shape.iter().product();
-            let values: Vec<f32> = if name.ends_with("bias") {
-                vec![0.0; n]
-            } else {
-                let fan_in: usize = shape[1..].iter().product();
-                let scale = if i == last { 0.01 } else { 1.0 };
-                let bound = scale * (6.0 / fan_in as f32).sqrt();
-                (0..n).map(|_| rng.random_range(-bound..bound)).collect()
-            };
-            let var = varmap
-                .get(
-                    shape.clone(),
-                    name,
-                    Init::Const(0.0),
-                    DType::F32,
-                    &Device::Cpu,
-                )
-                .map_err(|e| e.to_string())?;
-            let tensor = Tensor::from_vec(values, shape.clone(), &Device::Cpu);
-            let data = varmap.data().lock().expect("varmap lock");
-            data[name]
-                .set(&tensor.map_err(|e| e.to_string())?)
-                .map_err(|e| e.to_string())?;
-            drop(data);
-            let _ = var;
+        {
+            let mut data = varmap.data().lock().expect("varmap lock");
+            for (i, (name, shape)) in shapes.iter().enumerate() {
+                let values = value(name, shape, i == last)?;
+                let tensor = Tensor::from_vec(values, shape.clone(), &Device::Cpu)
+                    .and_then(|t| Var::from_tensor(&t))
+                    .map_err(|e| format!("tensor `{name}`: {e}"))?;
+                data.insert(name.clone(), tensor);
+            }
         }
         Ok(Self {
             config: config.clone(),
@@ -139,6 +199,28 @@ impl PixelActor {
             state_mean: vec![0.0; state_dim],
             state_std: vec![1.0; state_dim],
         })
+    }
+
+    /// Every saved value by name: the layers' parameters and the state's standardisation
+    /// (`state.mean`, `state.std`), what [`Self::from_weights`] reads back.
+    pub fn weights(&self) -> TensorMap {
+        let mut map: TensorMap = (self.names.iter().cloned()).zip(self.tensors()).collect();
+        for (name, values) in [(STATE_MEAN, &self.state_mean), (STATE_STD, &self.state_std)] {
+            let t = Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)
+                .expect("a vector of its own length");
+            map.insert(name.to_string(), t);
+        }
+        map
+    }
+
+    /// Parameter names in pass order (each encoder's, then the head's).
+    pub fn parameter_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The encoder of each camera, in [`ImageSpace`] order.
+    pub fn encoders(&self) -> &[CnnEncoder] {
+        &self.encoders
     }
 
     /// Its shape.
@@ -526,5 +608,51 @@ mod tests {
         };
         assert_eq!(weights(1), weights(1));
         assert_ne!(weights(1), weights(2));
+    }
+
+    #[test]
+    fn saved_weights_load_back_to_the_same_actions_and_bad_ones_are_named() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let config = PixelActorConfig {
+            features: 8,
+            net_arch: vec![16],
+            ..PixelActorConfig::default()
+        };
+        let mut actor = PixelActor::new(&config, &space(), 2, 3, &mut rng).unwrap();
+        let (states, images, _) = batch(&mut rng, 5);
+        actor.fit_state_scale(&states);
+        let weights = actor.weights();
+        let loaded = PixelActor::from_weights(&config, &space(), 2, 3, &weights).unwrap();
+        let mut cache = PixelCache::default();
+        let want = actor.forward(&states, &images, 5, &mut cache).unwrap();
+        let got = loaded.forward(&states, &images, 5, &mut cache).unwrap();
+        assert_eq!(want, got, "the state's standardisation saves too");
+
+        let error = |weights: &TensorMap| {
+            PixelActor::from_weights(&config, &space(), 2, 3, weights)
+                .err()
+                .unwrap()
+        };
+        let mut missing = weights.clone();
+        missing.remove("enc1.conv2.bias");
+        assert!(error(&missing).contains("enc1.conv2.bias"));
+        let mut extra = weights.clone();
+        extra.insert(
+            "head.9.weight".into(),
+            Tensor::zeros(2, DType::F32, &Device::Cpu).unwrap(),
+        );
+        assert!(error(&extra).contains("head.9.weight"));
+        let mut shaped = weights.clone();
+        shaped.insert(
+            "head.0.bias".into(),
+            Tensor::zeros(7, DType::F32, &Device::Cpu).unwrap(),
+        );
+        assert!(error(&shaped).contains("head.0.bias"));
+        let mut zero_std = weights;
+        zero_std.insert(
+            "state.std".into(),
+            Tensor::zeros(2, DType::F32, &Device::Cpu).unwrap(),
+        );
+        assert!(error(&zero_std).contains("state.std"));
     }
 }

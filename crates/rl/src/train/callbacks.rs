@@ -243,7 +243,9 @@ impl Callback for Evaluate {
         let (meta, weights) = ctx.model()?;
         let make_actor = || -> Result<Actor<'static>> {
             let mut policy = Policy::from_parts(meta.clone(), &weights)?;
-            Ok(Box::new(move |obs: &[f32]| policy.act(obs, true)))
+            Ok(Box::new(move |obs: &[f32], images: Option<&[u8]>| {
+                policy.act_with_images(obs, images, true)
+            }))
         };
         let result = evaluate_parallel(
             &make_actor,

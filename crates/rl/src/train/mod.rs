@@ -246,6 +246,7 @@ impl<A: Algorithm> LearnerSnapshot for Snapshot<'_, A> {
             train_seed: config.seed,
             n_envs: config.n_envs,
             privileged_dim: self.privileged_dim,
+            pixel_actor: None,
         }
     }
 
