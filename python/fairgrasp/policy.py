@@ -31,16 +31,54 @@ class Policy:
 
     def predict(
         self,
-        observation: np.ndarray,
+        observation: np.ndarray | dict[str, np.ndarray],
         state: Any = None,
         episode_start: Any = None,
         deterministic: bool = False,
     ) -> tuple[np.ndarray, None]:
         """SB3's ``predict``: ``(actions, None)`` for one observation ``(obs_dim,)`` or a batch
-        ``(n, obs_dim)``. Deterministic: the distribution's mode; otherwise a sample from the
-        policy's own seeded stream (:meth:`set_seed`). The state arguments exist for SB3's
-        signature; the policies are not recurrent."""
+        ``(n, obs_dim)``, or for a camera policy one ``Dict`` observation (``obs_mode=
+        "rgb+state"``: ``{"state": (obs_dim,), "scene_rgb": (h, w, 3), ...}``) or a batch of
+        them (each entry with a leading ``n``). Deterministic: the distribution's mode;
+        otherwise a sample from the policy's own seeded stream (:meth:`set_seed`; a camera
+        policy always acts deterministically). The state arguments exist for SB3's signature;
+        the policies are not recurrent."""
+        if isinstance(observation, dict):
+            return self._act_on_dict(observation, deterministic), None
+        if self.image_views:
+            raise ValueError(
+                "this camera policy reads a Dict observation: "
+                f"{{'state', {', '.join(repr(v[0]) for v in self.image_views)}}}"
+            )
         return self._policy.act(observation, deterministic), None
+
+    def _act_on_dict(self, observation: dict[str, np.ndarray], deterministic: bool) -> np.ndarray:
+        if "state" not in observation:
+            raise ValueError(f"invalid observation: no 'state' among {sorted(observation)}")
+        state = np.asarray(observation["state"], dtype=np.float32)
+        rows = state.shape[0] if state.ndim == 2 else None
+        parts = []
+        for name, height, width, channels in self.image_views:
+            if name not in observation:
+                raise ValueError(f"invalid observation: no {name!r} among {sorted(observation)}")
+            image = np.asarray(observation[name])
+            want = (height, width, channels) if rows is None else (rows, height, width, channels)
+            if image.shape != want or image.dtype != np.uint8:
+                raise ValueError(
+                    f"invalid observation: {name!r} must be uint8 of shape {want}, "
+                    f"got {image.dtype} {image.shape}"
+                )
+            parts.append(image.reshape(1 if rows is None else rows, -1))
+        images = np.ascontiguousarray(np.concatenate(parts, axis=1) if parts else np.zeros((0,), np.uint8))
+        if rows is None:
+            images = images.reshape(-1)
+        return self._policy.act_with_images(state, images, deterministic)
+
+    @property
+    def image_views(self) -> list[tuple[str, int, int, int]]:
+        """The camera images a camera policy reads, ``(name, height, width, channels)``;
+        empty for a policy of the observation vector."""
+        return self._policy.image_views()
 
     def set_seed(self, seed: int) -> None:
         """Restarts the stream of stochastic actions."""

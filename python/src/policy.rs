@@ -4,7 +4,7 @@
 use crate::convert::f32_values;
 use crate::errors::{poisoned, rl_error};
 use fairgrasp_rl::Policy as NativePolicy;
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -68,6 +68,48 @@ impl Policy {
             None => array.into_any(),
             Some(rows) => array.reshape([rows, self.act_dim])?.into_any(),
         })
+    }
+
+    /// Actions of a camera policy for `state` (`(obs_dim,)` or `(n, obs_dim)`) and `images`:
+    /// `uint8`, each observation's cameras' bytes one after another in `image_views` order
+    /// (`(image_len,)` or `(n, image_len)`). A policy without cameras ignores `images`.
+    #[pyo3(signature = (state, images, deterministic=true))]
+    fn act_with_images<'py>(
+        &self,
+        py: Python<'py>,
+        state: &Bound<'py, PyAny>,
+        images: PyReadonlyArrayDyn<'py, u8>,
+        deterministic: bool,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let shape: Vec<usize> = state.getattr("shape")?.extract()?;
+        let rows = match shape.as_slice() {
+            [n] if *n == self.obs_dim => None,
+            [rows, n] if *n == self.obs_dim && *rows > 0 => Some(*rows),
+            _ => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "invalid observation: expected `state` of shape ({},) or (n, {}), got {shape:?}",
+                    self.obs_dim, self.obs_dim
+                )));
+            }
+        };
+        let values = f32_values(state, "state", &shape)?;
+        let bytes: Vec<u8> = images.as_array().iter().copied().collect();
+        let actions = py.detach(|| {
+            let mut policy = self.inner.lock().map_err(|_| poisoned("policy"))?;
+            (policy.act_with_images(&values, Some(&bytes), deterministic)).map_err(rl_error)
+        })?;
+        let array = PyArray1::from_vec(py, actions);
+        Ok(match rows {
+            None => array.into_any(),
+            Some(rows) => array.reshape([rows, self.act_dim])?.into_any(),
+        })
+    }
+
+    /// The camera images a camera policy reads, as `(name, height, width, channels)` in the
+    /// order their bytes follow one another; empty for a policy of the observation vector.
+    fn image_views(&self) -> PyResult<Vec<(String, u32, u32, u32)>> {
+        let policy = self.inner.lock().map_err(|_| poisoned("policy"))?;
+        Ok(crate::env::image_views(policy.image_space()))
     }
 
     /// Restarts the stream of stochastic actions.

@@ -221,7 +221,7 @@ pub fn evaluate(
     let result = py
         .detach(|| {
             native_evaluate(
-                &mut |obs| policy.act(obs, true),
+                &mut |obs, images| policy.act_with_images(obs, images, true),
                 &env_id,
                 &table,
                 episodes,

@@ -74,3 +74,38 @@ def test_bad_models_and_observations_raise_clear_errors(tmp_path, trained_model)
     bad[5] = np.nan
     with pytest.raises(RuntimeError, match="value 5 is NaN"):
         policy.predict(bad)
+
+
+def test_a_camera_policy_predicts_on_dict_observations_as_fairgrasp_eval(tmp_path, fairgrasp_bin, trained_model):
+    student = tmp_path / "student"
+    settings = ["rounds=2", "steps_per_round=4", "n_envs=2", "batch_size=4", "eval_episodes=1",
+                "env.camera.width=24", "env.camera.height=24"]
+    args = [a for s in settings for a in ("--set", s)]
+    run_cli(fairgrasp_bin, "distill", "--teacher", str(trained_model), "--run-dir", str(student), *args)
+    policy = fairgrasp.Policy.load(student)
+    assert policy.image_views == [("scene_rgb", 24, 24, 3)]
+    env = gym.make(f"fairgrasp/{policy.env_id}", **policy.env_config)
+    seed = 2_000_000_000
+    observations, total = [], 0.0
+    for episode in range(2):
+        obs, _ = env.reset(seed=seed + episode)
+        while True:
+            observations.append(obs)
+            action, _ = policy.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(np.clip(action, -1, 1))
+            total += reward
+            if terminated or truncated:
+                break
+    # The same episodes through Rust's evaluation of the saved model: the same return.
+    result = fairgrasp.evaluate(policy, episodes=2, seed=seed)
+    assert abs(result["mean_return"] - total / 2) < 1e-3 * max(1.0, abs(total))
+    # A batch of Dict observations gives each one's action.
+    batch = {key: np.stack([o[key] for o in observations[:5]]) for key in observations[0]}
+    actions, _ = policy.predict(batch, deterministic=True)
+    singles = np.stack([policy.predict(o, deterministic=True)[0] for o in observations[:5]])
+    assert actions.shape == singles.shape == (5, policy.act_dim)
+    np.testing.assert_allclose(actions, singles, atol=1e-5)
+    with pytest.raises(ValueError, match="Dict observation"):
+        policy.predict(observations[0]["state"])
+    with pytest.raises(ValueError, match="scene_rgb"):
+        policy.predict({"state": observations[0]["state"], "scene_rgb": np.zeros((8, 8, 3), np.uint8)})

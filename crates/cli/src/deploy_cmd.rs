@@ -4,6 +4,7 @@
 use anyhow::{Context, Result, bail};
 use fairgrasp_deploy::calibration::Calibration;
 use fairgrasp_deploy::fairino::{ClientConfig, FairinoClient};
+use fairgrasp_deploy::frame_source::{FrameSource, TcpFrames};
 use fairgrasp_deploy::pose_source::{FixedPose, PoseSource, StreamedPose, parse_fixed_pose};
 use fairgrasp_deploy::runner::{
     AfterSuccess, DeployOptions, Deployment, EpisodeHost, JsonLog, ModelIo, OperatorHost, TwinHost,
@@ -99,12 +100,17 @@ pub struct DeployArgs {
     /// drive into it; live runs refuse a fixed pose without this flag.
     #[arg(long, requires = "object_pose")]
     pub static_object: bool,
-    /// Receive object poses as JSON-line datagrams on this address (e.g. 0.0.0.0:20101).
+    /// Receive object poses as JSON-line datagrams on this address (e.g. 0.0.0.0:20102).
     #[arg(long)]
     pub pose_udp: Option<String>,
     /// Read object poses as JSON lines from this TCP address (the twin's feed: IP:20100).
     #[arg(long)]
     pub pose_tcp: Option<String>,
+    /// A camera policy's images: frames from this TCP address (the twin's camera feed at
+    /// IP:20101, or your camera's server: examples/camera_feed.py; protocol in
+    /// docs/deployment.md). With fairgrasp twin the twin's feed is the default.
+    #[arg(long, value_name = "IP:PORT")]
+    pub camera_tcp: Option<String>,
     /// The gripper's index on the controller.
     #[arg(long, default_value_t = 1)]
     pub gripper_index: u8,
@@ -206,6 +212,26 @@ pub fn run(args: &DeployArgs) -> Result<()> {
     } else {
         bail!("where is the object? give --object-pose, --pose-udp or --pose-tcp");
     };
+    let camera: Option<Box<dyn FrameSource>> = match (policy.image_space(), &args.camera_tcp) {
+        (None, Some(_)) => bail!("--camera-tcp: the model reads no camera images"),
+        (None, None) => None,
+        (Some(space), given) => {
+            let addr = match (given, twin.is_some()) {
+                (Some(addr), _) => addr.clone(),
+                (None, true) => format!("{}:20101", args.robot.robot),
+                (None, false) => bail!(
+                    "the model reads camera images ({}): give the camera feed's address \
+                     (--camera-tcp IP:PORT; docs/deployment.md)",
+                    space.describe()
+                ),
+            };
+            let quiet = Duration::from_secs(2);
+            Some(Box::new(
+                TcpFrames::connect(&addr, space, Duration::from_secs(1), quiet)
+                    .with_context(|| format!("the camera feed at {addr}"))?,
+            ))
+        }
+    };
     let client = args.robot.connect()?;
     let interrupt = interrupt_flag()?;
     let options = DeployOptions {
@@ -227,6 +253,9 @@ pub fn run(args: &DeployArgs) -> Result<()> {
         log.clone(),
         interrupt.clone(),
     )?;
+    if let Some(frames) = camera {
+        deployment.set_camera(frames);
+    }
     for why in deployment.mismatches() {
         eprintln!("warning: {why}");
     }

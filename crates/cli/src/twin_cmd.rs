@@ -47,6 +47,13 @@ pub struct TwinArgs {
     /// Serve no object-pose feed over TCP.
     #[arg(long)]
     pub no_pose_feed: bool,
+    /// TCP port of the camera feed, served when the staged environment observes camera images
+    /// (a camera policy's model): frames of docs/deployment.md's protocol.
+    #[arg(long, default_value_t = 20101)]
+    pub camera_port: u16,
+    /// Serve no camera feed.
+    #[arg(long)]
+    pub no_camera_feed: bool,
     /// Also send the object pose as UDP datagrams to this address.
     #[arg(long, value_name = "IP:PORT")]
     pub pose_udp: Option<SocketAddr>,
@@ -196,6 +203,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
         servo_udp_port: (!args.no_servo_udp).then_some(args.servo_udp_port),
         pose_port: (!args.no_pose_feed).then_some(args.pose_port),
         pose_udp: args.pose_udp,
+        camera_port: (!args.no_camera_feed).then_some(args.camera_port),
         seed: args.seed,
         start: StartState {
             enabled: !args.start_disabled,
@@ -235,6 +243,9 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     }
     if let Some(udp) = args.pose_udp {
         println!("  object pose  UDP datagrams to {udp}");
+    }
+    if let Some(addr) = twin.camera_addr() {
+        println!("  camera       {addr} (frames: a JSON header line, then the pixels)");
     }
     if !faults_text.is_empty() {
         println!("  faults       {}", faults_text.join("; "));

@@ -19,6 +19,7 @@ pub mod commissioning;
 pub mod error;
 pub mod export;
 pub mod fairino;
+pub mod frame_source;
 pub mod kinematics;
 pub mod pose_source;
 pub mod robot;

@@ -138,7 +138,7 @@ pub struct StreamedPose {
 }
 
 impl StreamedPose {
-    /// Listens for datagrams on `bind` (e.g. `127.0.0.1:20101`), one message each.
+    /// Listens for datagrams on `bind` (e.g. `127.0.0.1:20102`), one message each.
     pub fn udp(bind: &str) -> Result<Self> {
         let socket = UdpSocket::bind(bind).map_err(|e| net_error("bind UDP", bind, e))?;
         socket.set_read_timeout(Some(Duration::from_millis(50)))?;

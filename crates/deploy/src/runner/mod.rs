@@ -30,6 +30,7 @@ pub use model_io::ModelIo;
 use crate::calibration::Calibration;
 use crate::error::{DeployError, Result};
 use crate::fairino::fr5;
+use crate::frame_source::FrameSource;
 use crate::pose_source::PoseSource;
 use crate::robot::{RobotCommand, RobotLink};
 use crate::safety::{Fault, SafetyConfig, SafetyFilter, Watchdog};
@@ -150,6 +151,8 @@ pub struct Deployment {
     watchdog: Watchdog,
     options: DeployOptions,
     interrupt: Arc<AtomicBool>,
+    /// A camera policy's images ([`Self::set_camera`]).
+    camera: Option<Box<dyn FrameSource>>,
     servo_ticks: u32,
     /// The servo period: the control period over the speed scale, divided evenly into
     /// `servo_ticks` periods of at most the configured one (6.67 ms at scale 1), so that a
@@ -199,9 +202,15 @@ impl Deployment {
             watchdog,
             options,
             interrupt,
+            camera: None,
             servo_ticks,
             tick: Duration::from_secs_f64(tick),
         })
+    }
+
+    /// Where a camera policy reads its images (a camera policy refuses to run without).
+    pub fn set_camera(&mut self, frames: Box<dyn FrameSource>) {
+        self.camera = Some(frames);
     }
 
     /// Servo periods per control step (the control period over the speed scale, over the
@@ -294,6 +303,15 @@ impl Deployment {
         pose: &mut dyn PoseSource,
     ) -> Result<(Vec<EpisodeReport>, Option<Fault>)> {
         let mut episodes = Vec::new();
+        if let (Some(space), None) = (self.policy.image_space(), &self.camera) {
+            return Err(DeployError::config(
+                "camera feed",
+                format!(
+                    "the model reads camera images ({}): give it a camera feed (--camera-tcp)",
+                    space.describe()
+                ),
+            ));
+        }
         if let Err(fault) = self.prepare() {
             return Ok((episodes, Some(fault)));
         }
@@ -562,6 +580,14 @@ impl Deployment {
             .wait_first(self.options.pose_timeout)
             .map_err(|e| Fault::StreamFailed(format!("object pose: {e}")))?;
         let mut object = first.message;
+        let mut images = match &mut self.camera {
+            Some(frames) => Some(
+                frames
+                    .wait_first(self.options.pose_timeout)
+                    .map_err(|e| Fault::StreamFailed(format!("camera: {e}")))?,
+            ),
+            None => None,
+        };
         let start = self.checked_state()?;
         self.filter.start(&start.state.joints_deg)?;
         self.link.send(&RobotCommand::ServoMoveStart)?;
@@ -607,6 +633,11 @@ impl Deployment {
                     }
                     object = p.message;
                 }
+                if let Some(frames) = &mut self.camera {
+                    images = (frames.latest())
+                        .map_err(|e| Fault::StreamFailed(format!("camera: {e}")))?
+                        .or(images);
+                }
                 state = reader.estimate(
                     &self.io,
                     &self.calibration,
@@ -627,9 +658,22 @@ impl Deployment {
                 }
             }
             let obs = (self.io).observe(&state, &shown, self.options.safety.speed_scale);
-            let output = self.policy.act(&obs, true).map_err(|e| Fault::CallFailed {
-                call: "policy".into(),
-                message: e.to_string(),
+            if let Some(i) = &images {
+                let age = self.link.now().saturating_duration_since(i.received_at);
+                let deadline_ms = self.options.safety.frame_deadline_ms;
+                if age.as_secs_f64() * 1000.0 > deadline_ms {
+                    return Err(Fault::StaleFrames {
+                        age_ms: age.as_secs_f64() * 1000.0,
+                        deadline_ms,
+                    });
+                }
+            }
+            let pixels = images.as_ref().map(|i| i.bytes.as_slice());
+            let output = (self.policy.act_with_images(&obs, pixels, true)).map_err(|e| {
+                Fault::CallFailed {
+                    call: "policy".into(),
+                    message: e.to_string(),
+                }
             })?;
             if let Some(i) = output.iter().position(|v| !v.is_finite()) {
                 return Err(Fault::NonFiniteOutput {

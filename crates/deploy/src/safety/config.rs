@@ -51,6 +51,9 @@ pub struct SafetyConfig {
     /// The newest object pose may be at most this old (ms); a perception at 30 Hz sends one
     /// every 33 ms.
     pub pose_deadline_ms: f64,
+    /// A camera policy's newest images may be at most this old (ms) when it acts; a camera at
+    /// 30 Hz sends one every 33 ms.
+    pub frame_deadline_ms: f64,
     /// The servo period (ms): one ServoJ per period, the controller's 8 ms.
     pub servo_period_ms: f64,
 }
@@ -71,6 +74,7 @@ impl Default for SafetyConfig {
             cell_max_mm: [1200.0, 1200.0, 1400.0],
             state_deadline_ms: 50.0,
             pose_deadline_ms: 250.0,
+            frame_deadline_ms: 150.0,
             servo_period_ms: 8.0,
         }
     }
@@ -147,6 +151,7 @@ impl SafetyConfig {
         }
         positive("state_deadline_ms", self.state_deadline_ms)?;
         positive("pose_deadline_ms", self.pose_deadline_ms)?;
+        positive("frame_deadline_ms", self.frame_deadline_ms)?;
         if !(1.0..=16.0).contains(&self.servo_period_ms) {
             return bad(
                 "servo_period_ms",

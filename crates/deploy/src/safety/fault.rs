@@ -29,6 +29,13 @@ pub enum Fault {
         /// The pose deadline (ms).
         deadline_ms: f64,
     },
+    /// A camera policy's newest images are older than the deadline.
+    StaleFrames {
+        /// Age of the oldest of the newest frames (ms).
+        age_ms: f64,
+        /// The frame deadline (ms).
+        deadline_ms: f64,
+    },
     /// The state stream failed (closed, reset, unreadable).
     StreamFailed(String),
     /// A call to the controller failed or timed out.
@@ -82,6 +89,7 @@ impl Fault {
             Self::FrozenState { .. } => "frozen_state",
             Self::Collision => "collision",
             Self::StalePose { .. } => "stale_pose",
+            Self::StaleFrames { .. } => "stale_frames",
             Self::StreamFailed(_) => "stream_failed",
             Self::CallFailed { .. } => "call_failed",
             Self::ControllerFault { .. } => "controller_fault",
@@ -126,6 +134,14 @@ impl fmt::Display for Fault {
                 f,
                 "stale object pose: the newest is {age_ms:.0} ms old (deadline {deadline_ms:.0} \
                  ms); check the perception (or the twin's pose feed)"
+            ),
+            Self::StaleFrames {
+                age_ms,
+                deadline_ms,
+            } => write!(
+                f,
+                "stale camera images: the newest are {age_ms:.0} ms old (deadline \
+                 {deadline_ms:.0} ms); check the camera feed (or the twin's)"
             ),
             Self::StreamFailed(m) => write!(f, "state stream failed: {m}"),
             Self::CallFailed { call, message } => write!(f, "call failed: {call}: {message}"),

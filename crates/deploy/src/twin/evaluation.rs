@@ -56,6 +56,9 @@ pub fn evaluate(
         if out.played == 0 {
             out.mismatches = deployment.mismatches();
         }
+        if let Some(frames) = link.frame_source() {
+            deployment.set_camera(Box::new(frames));
+        }
         let mut host = link.host_from(seed + out.played as u64);
         let report = deployment.run(&mut host, &mut link.pose_source())?;
         out.played += report.episodes.len() as u32;

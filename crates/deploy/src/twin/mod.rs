@@ -32,6 +32,7 @@
 //!   (see [`faults`]).
 
 pub mod call_log;
+pub mod camera_feed;
 pub mod controller;
 pub mod evaluation;
 pub mod faults;
@@ -53,6 +54,7 @@ use crate::fairino::xmlrpc::XmlRpcServer;
 use crate::pose_source::PoseMessage;
 use crate::robot::RobotState;
 use call_log::{CallLog, CallRecord};
+use camera_feed::{CameraFeed, FramesFn, TwinCamera};
 use controller::{Controller, ControllerConfig, StartState, pose_to_wire};
 use fairgrasp_env::random::standard_normal_f64;
 use fairgrasp_sim::kinematics::SerialChain;
@@ -95,6 +97,11 @@ pub struct TwinConfig {
     pub pose_udp: Option<SocketAddr>,
     /// Time between two messages of the pose feed.
     pub pose_period: Duration,
+    /// The camera feed's TCP port, served when the staged environment observes camera images
+    /// (`[camera]`); `None`: not served.
+    pub camera_port: Option<u16>,
+    /// Time between two frames of the camera feed.
+    pub camera_period: Duration,
     /// Seed of the first episode's placement and of the injected noise.
     pub seed: u64,
     /// How the controller is found at power-on.
@@ -118,6 +125,8 @@ impl Default for TwinConfig {
             pose_port: Some(20100),
             pose_udp: None,
             pose_period: Duration::from_millis(33),
+            camera_port: Some(20101),
+            camera_period: Duration::from_millis(33),
             seed: 0,
             start: StartState::default(),
             faults: Vec::new(),
@@ -134,6 +143,7 @@ impl TwinConfig {
             cnde_port: 0,
             servo_udp_port: Some(0),
             pose_port: Some(0),
+            camera_port: Some(0),
             ..Self::default()
         }
     }
@@ -359,6 +369,7 @@ pub struct TwinHandle {
     cnde: CndeServer,
     servo_udp: Option<ServoPort>,
     pose: Option<PoseFeed>,
+    camera: Option<CameraFeed>,
     sim: Option<JoinHandle<()>>,
 }
 
@@ -456,6 +467,39 @@ impl Twin {
             }
             None => None,
         };
+        let staged_camera = match config.camera_port {
+            Some(_) => {
+                let world = shared.world.lock().expect("world lock");
+                TwinCamera::for_env(&config.env_config, world.scene())?
+            }
+            None => None,
+        };
+        let camera = match (config.camera_port, staged_camera) {
+            (Some(port), Some(camera)) => {
+                let addr = SocketAddr::new(config.bind, port);
+                let camera = Mutex::new(camera);
+                let source: FramesFn = {
+                    let shared = shared.clone();
+                    Arc::new(move || {
+                        let world = shared.world.lock().expect("world lock");
+                        let stamp = shared.now();
+                        let mut camera = camera.lock().expect("camera lock");
+                        match camera.frames(world.scene(), stamp) {
+                            Ok(frames) => Some(frames),
+                            Err(e) => {
+                                tracing::error!("twin camera: {e}");
+                                None
+                            }
+                        }
+                    })
+                };
+                Some(
+                    CameraFeed::spawn(addr, config.camera_period, source)
+                        .map_err(|e| listen_error("camera feed", addr, e))?,
+                )
+            }
+            _ => None,
+        };
         let sim = {
             let shared = shared.clone();
             std::thread::Builder::new()
@@ -468,6 +512,7 @@ impl Twin {
             cnde,
             servo_udp,
             pose,
+            camera,
             sim: Some(sim),
         })
     }
@@ -497,6 +542,11 @@ impl TwinHandle {
     /// Where the object-pose feed is served over TCP.
     pub fn pose_addr(&self) -> Option<SocketAddr> {
         self.pose.as_ref().map(|p| p.local_addr())
+    }
+
+    /// Where the camera feed is served over TCP (when the staged environment has cameras).
+    pub fn camera_addr(&self) -> Option<SocketAddr> {
+        self.camera.as_ref().map(|c| c.local_addr())
     }
 
     /// The arm task staged.
@@ -594,6 +644,7 @@ impl Drop for TwinHandle {
         self.rpc.shutdown();
         self.cnde.shutdown();
         self.pose = None;
+        self.camera = None;
         if let Some(port) = self.servo_udp.as_mut() {
             port.join();
         }

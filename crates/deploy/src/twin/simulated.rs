@@ -8,14 +8,17 @@
 //! latency (drawn per call, half before the call acts and half after, as the twin's
 //! `latency_ms` fault). The world steps at its physics rate under the controller's set points;
 //! the state stream keeps a snapshot every stream period (the CNDE frame a real client reads),
-//! with encoder noise, and the pose feed one every feed period.
+//! with encoder noise, the pose feed one every feed period, and a camera policy's camera a
+//! frame every camera period, visible a camera delay later.
 
+use super::camera_feed::TwinCamera;
 use super::controller::{Controller, ControllerConfig, StartState};
 use super::faults::TrackingModel;
 use super::world::World;
 use crate::error::{DeployError, Result};
 use crate::fairino::error_codes::codes;
 use crate::fairino::error_codes::error_code_meaning;
+use crate::frame_source::{FrameSource, ReceivedImages};
 use crate::pose_source::{PoseMessage, PoseSource, ReceivedPose};
 use crate::robot::{RobotCommand, RobotLink, RobotState, StampedState};
 use crate::runner::EpisodeHost;
@@ -23,6 +26,7 @@ use fairgrasp_env::random::standard_normal_f64;
 use fairgrasp_sim::rapier3d::na::Isometry3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -37,6 +41,10 @@ pub struct SimulatedSettings {
     pub stream_period_ms: f64,
     /// The object pose feed's period (ms).
     pub pose_period_ms: f64,
+    /// The camera's frame period (ms), when the staged environment has cameras.
+    pub camera_period_ms: f64,
+    /// How long after its capture a frame reaches the loop (ms): exposure, readout, transfer.
+    pub camera_delay_ms: f64,
     /// Seed of the first episode's placement (episode `i` uses `seed + i`) and of the noise.
     pub seed: u64,
 }
@@ -50,6 +58,8 @@ impl Default for SimulatedSettings {
             joint_noise_deg: 0.05,
             stream_period_ms: 8.0,
             pose_period_ms: 1000.0 / 30.0,
+            camera_period_ms: 1000.0 / 30.0,
+            camera_delay_ms: 40.0,
             seed: 0,
         }
     }
@@ -69,10 +79,11 @@ impl SimulatedSettings {
             ("joint_noise_deg", self.joint_noise_deg, 10.0),
             ("stream_period_ms", self.stream_period_ms, 1000.0),
             ("pose_period_ms", self.pose_period_ms, 1000.0),
+            ("camera_period_ms", self.camera_period_ms, 1000.0),
+            ("camera_delay_ms", self.camera_delay_ms, 1000.0),
         ] {
-            if !(v.is_finite() && (0.0..=max).contains(&v))
-                || (key != "joint_noise_deg" && v == 0.0)
-            {
+            let zero_ok = matches!(key, "joint_noise_deg" | "camera_delay_ms");
+            if !(v.is_finite() && (0.0..=max).contains(&v)) || (!zero_ok && v == 0.0) {
                 return Err(DeployError::config(
                     key,
                     format!("must be in (0, {max}], got {v}"),
@@ -104,7 +115,14 @@ struct Inner {
     /// The last pose feed sample.
     pose: Option<(f64, Isometry3<f64>)>,
     next_pose: f64,
+    /// The staged cameras, and their last frames with their capture times, oldest first.
+    camera: Option<TwinCamera>,
+    frames: VecDeque<(f64, Vec<u8>)>,
+    next_frame: f64,
 }
+
+/// Frames kept: enough to cover a camera delay of several periods.
+const FRAMES_KEPT: usize = 32;
 
 impl Inner {
     fn instant(&self, t: f64) -> Instant {
@@ -126,9 +144,26 @@ impl Inner {
                 self.pose = self.world.object_pose().map(|p| (now, p));
                 self.next_pose += self.settings.pose_period_ms / 1000.0;
             }
+            if self.camera.is_some() && now >= self.next_frame {
+                self.capture(now)?;
+                self.next_frame += self.settings.camera_period_ms / 1000.0;
+            }
             self.next_physics += self.dt;
         }
         self.t = self.t.max(t);
+        Ok(())
+    }
+
+    /// Draws the cameras' frame of the world as it is now, stamped as captured at `stamp`.
+    fn capture(&mut self, stamp: f64) -> Result<()> {
+        if let Some(camera) = &mut self.camera {
+            let frames = camera.frames(self.world.scene(), stamp)?;
+            let bytes = frames.into_iter().flat_map(|(_, pixels)| pixels).collect();
+            if self.frames.len() == FRAMES_KEPT {
+                self.frames.pop_front();
+            }
+            self.frames.push_back((stamp, bytes));
+        }
         Ok(())
     }
 
@@ -207,6 +242,12 @@ impl Inner {
         self.controller.observe(now, measured);
         self.publish_state(now);
         self.pose = self.world.object_pose().map(|p| (now, p));
+        // The camera runs on through a reset: the placed scene is seen in a frame that has
+        // just arrived (captured a delay ago), the next one a period later.
+        self.frames.clear();
+        let delay = self.settings.camera_delay_ms / 1000.0;
+        self.capture(now - delay)?;
+        self.next_frame = now + self.settings.camera_period_ms / 1000.0;
         Ok(())
     }
 }
@@ -225,6 +266,7 @@ impl SimulatedController {
     ) -> Result<Self> {
         settings.validate()?;
         let world = World::new(env_id, env_config, settings.seed)?;
+        let camera = TwinCamera::for_env(env_config, world.scene())?;
         let controller = Controller::new(
             ControllerConfig::fr5(&world.limits(), StartState::default()),
             world.chain().clone(),
@@ -245,6 +287,9 @@ impl SimulatedController {
             next_stream: 0.0,
             pose: None,
             next_pose: 0.0,
+            camera,
+            frames: VecDeque::new(),
+            next_frame: 0.0,
         };
         let seed = inner.settings.seed;
         inner.reset(seed)?;
@@ -258,6 +303,17 @@ impl SimulatedController {
     /// The object's pose feed.
     pub fn pose_source(&self) -> SimulatedPose {
         SimulatedPose(self.clone())
+    }
+
+    /// The staged camera's frames, for a camera policy (`None` when the staged environment has
+    /// no cameras).
+    pub fn frame_source(&self) -> Option<SimulatedFrames> {
+        let inner = self.inner();
+        let views = inner.camera.as_ref()?.space().views.len();
+        Some(SimulatedFrames {
+            controller: self.clone(),
+            views,
+        })
     }
 
     /// The episodes: episode `i` placed from `seed + i`, judged by the task's own rule on the
@@ -361,6 +417,29 @@ impl PoseSource for SimulatedPose {
                 },
                 received_at: inner.instant(t),
             }
+        }))
+    }
+}
+
+/// The newest frame that has reached the loop: captured at least the camera delay ago.
+pub struct SimulatedFrames {
+    controller: SimulatedController,
+    views: usize,
+}
+
+impl FrameSource for SimulatedFrames {
+    fn latest(&mut self) -> Result<Option<ReceivedImages>> {
+        let inner = self.controller.inner();
+        let delay = inner.settings.camera_delay_ms / 1000.0;
+        let arrived = inner
+            .frames
+            .iter()
+            .rev()
+            .find(|(t, _)| t + delay <= inner.t);
+        Ok(arrived.map(|(t, bytes)| ReceivedImages {
+            bytes: bytes.clone(),
+            received_at: inner.instant(t + delay),
+            stamps: vec![*t; self.views],
         }))
     }
 }
