@@ -48,3 +48,15 @@ def run_cli(binary: Path, *args: str, cwd: Path | None = None) -> subprocess.Com
     return subprocess.run(
         [str(binary), *args], cwd=cwd, capture_output=True, text=True, check=True, timeout=600
     )
+
+
+@pytest.fixture(scope="session")
+def camera_model(tmp_path_factory, fairgrasp_bin, trained_model) -> Path:
+    """A camera policy distilled from the trained model in a few seconds (24×24 RGB): for the
+    plumbing, not for grasping."""
+    student = tmp_path_factory.mktemp("camera") / "student"
+    settings = ["rounds=2", "steps_per_round=4", "n_envs=2", "batch_size=4", "eval_episodes=1",
+                "env.camera.width=24", "env.camera.height=24"]
+    args = [a for s in settings for a in ("--set", s)]
+    run_cli(fairgrasp_bin, "distill", "--teacher", str(trained_model), "--run-dir", str(student), *args)
+    return student

@@ -1,4 +1,4 @@
-"""Smoke runs of the examples: the design's SB3 script on our VecEnv, and the Ray Tune sweep."""
+"""Smoke runs of the examples: the design's SB3 script on our VecEnv, the Ray Tune sweep, and the camera feed."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-from conftest import REPO
+from conftest import REPO, run_cli
 
 
 def run_example(script: str, *args: str, cwd) -> dict:
@@ -53,3 +53,24 @@ def test_ray_tune_sweep_smoke_runs_two_trials(tmp_path):
     assert 0.0 <= summary["best_success_rate"] <= 1.0
     assert summary["best_timesteps"] == 4096
     assert summary["best_config"]["learning_rate"] in (1e-4, 3e-4)
+
+
+def test_the_camera_feed_example_serves_what_fairgrasp_camera_check_reads(fairgrasp_bin, camera_model):
+    feed = subprocess.Popen(
+        [sys.executable, str(REPO / "examples" / "camera_feed.py"), "--model", str(camera_model),
+         "--synthetic", "--port", "0", "--seconds", "20"],
+        stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        line = feed.stdout.readline()
+        assert line.startswith("camera feed on 127.0.0.1:"), line
+        port = int(line.split(":")[1])
+        out = run_cli(fairgrasp_bin, "camera-check", "--model", str(camera_model),
+                      "--camera-tcp", f"127.0.0.1:{port}", "--seconds", "1.5").stdout
+    finally:
+        feed.kill()
+        feed.wait()
+        feed.stdout.close()
+    print(out)
+    frames = int(out.split("scene_rgb: ")[1].split(" frames")[0])
+    assert frames >= 20, out

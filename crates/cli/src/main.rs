@@ -5,6 +5,7 @@ mod bench;
 mod bench_cnn;
 mod bench_learning;
 mod bench_sac;
+mod camera_check_cmd;
 mod commission_cmd;
 mod demo;
 mod deploy_cmd;
@@ -71,6 +72,9 @@ enum Command {
     Calibrate(commission_cmd::CalibrateArgs),
     /// Move each joint a few degrees and back, the operator confirming each direction.
     JogTest(commission_cmd::JogArgs),
+    /// Read a camera feed as the deployment would and report each camera's frames, rate and
+    /// age: check a camera policy's feed before deploying it.
+    CameraCheck(camera_check_cmd::CameraCheckArgs),
     /// Identify the arm's drives (delay and lag per joint, the gripper's close time) with small,
     /// slow moves through the safety layer; write the file the twin reads (dry run unless --live).
     Sysid(sysid_cmd::SysidArgs),
@@ -116,6 +120,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(args) => commission_cmd::calibrate(&args),
         Command::JogTest(args) => commission_cmd::jog(&args),
         Command::Sysid(args) => sysid_cmd::run(&args),
+        Command::CameraCheck(args) => camera_check_cmd::run(&args),
         Command::Twin(args) => twin_cmd::run(&args),
         Command::View(args) => view::run(&args),
     };

@@ -12,6 +12,10 @@
 //! min_deg = -175.0
 //! max_deg = 175.0
 //! # … six [[joint]] tables, j1 to j6
+//! [camera]          # a camera policy's scene camera as mounted (robot base frame, m)
+//! eye = [1.05, 0.0, 1.45]
+//! target = [0.45, 0.0, 0.78]
+//! fov_deg = 50.0
 //! ```
 
 use crate::error::{DeployError, Result};
@@ -38,6 +42,49 @@ pub struct JointCalibration {
     pub max_deg: f64,
 }
 
+/// The cell's scene camera as mounted, in the robot base frame: where a camera policy's images
+/// are taken from, compared before a run with the camera the policy learnt with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraPose {
+    /// The camera's optical centre (m).
+    pub eye: [f64; 3],
+    /// A point on its optical axis (m).
+    pub target: [f64; 3],
+    /// Vertical field of view (deg).
+    pub fov_deg: f64,
+}
+
+impl CameraPose {
+    fn validate(&self) -> Result<()> {
+        let finite = self.eye.iter().chain(&self.target).all(|v| v.is_finite());
+        let apart = (0..3)
+            .map(|i| (self.target[i] - self.eye[i]).powi(2))
+            .sum::<f64>()
+            > 1e-6;
+        if !(finite && apart) {
+            return Err(DeployError::config(
+                "calibration camera",
+                "eye and target must be finite and apart",
+            ));
+        }
+        if !(self.fov_deg.is_finite() && (5.0..=170.0).contains(&self.fov_deg)) {
+            return Err(DeployError::config(
+                "calibration camera (fov_deg)",
+                format!("must be 5 to 170 degrees, got {}", self.fov_deg),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The unit viewing direction.
+    pub fn direction(&self) -> [f64; 3] {
+        let d: [f64; 3] = std::array::from_fn(|i| self.target[i] - self.eye[i]);
+        let n = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+        d.map(|v| v / n)
+    }
+}
+
 /// The whole arm's mapping.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -48,6 +95,9 @@ pub struct Calibration {
     /// One table per joint, j1 to j6 (`[[joint]]` in the file).
     #[serde(rename = "joint")]
     pub joints: Vec<JointCalibration>,
+    /// The scene camera's pose, for camera policies (`[camera]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraPose>,
 }
 
 impl Calibration {
@@ -64,6 +114,7 @@ impl Calibration {
                     max_deg: (hi as f64).to_degrees(),
                 })
                 .collect(),
+            camera: None,
         }
     }
 
@@ -80,6 +131,9 @@ impl Calibration {
                     self.robot
                 ),
             ));
+        }
+        if let Some(camera) = &self.camera {
+            camera.validate()?;
         }
         if self.joints.len() != 6 {
             return Err(DeployError::config(

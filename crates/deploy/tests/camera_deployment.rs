@@ -156,3 +156,54 @@ fn a_camera_policy_acts_on_fresh_frames_and_stops_on_stale_ones() {
         other => panic!("expected stale frames, got {other:?}"),
     }
 }
+
+/// The calibration file's camera pose against the one the policy learnt with: none given,
+/// where it learnt, and moved or turned beyond the training's randomisation.
+#[test]
+fn the_cells_camera_pose_is_checked_against_the_models() {
+    use fairgrasp_deploy::calibration::CameraPose;
+    let dir = tempfile::tempdir().unwrap();
+    camera_model(dir.path());
+    let policy = Policy::load(dir.path()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let mut calibration = Calibration::identity(&io.limits_rad);
+    let why = io.camera_mismatch(&calibration).unwrap();
+    assert!(why.contains("no [camera] pose"), "{why}");
+    let scene = &io.camera.as_ref().unwrap().scene;
+    let trained = CameraPose {
+        eye: scene.eye.map(f64::from),
+        target: scene.target.map(f64::from),
+        fov_deg: scene.fov_deg as f64,
+    };
+    calibration.camera = Some(trained.clone());
+    assert_eq!(io.camera_mismatch(&calibration), None);
+    // The model learnt without visual randomisation: 5 mm and 1° are what it knows.
+    let mut moved = trained.clone();
+    moved.eye[1] += 0.05;
+    moved.target[1] += 0.05;
+    calibration.camera = Some(moved);
+    let why = io.camera_mismatch(&calibration).unwrap();
+    assert!(why.contains("50 mm") && !why.contains("looks"), "{why}");
+    let mut turned = trained;
+    turned.target[2] -= 0.1;
+    turned.fov_deg += 4.0;
+    calibration.camera = Some(turned);
+    let why = io.camera_mismatch(&calibration).unwrap();
+    assert!(
+        why.contains("looks") && why.contains("field of view differs by 4.0°"),
+        "{why}"
+    );
+    let mut bad = calibration.clone();
+    bad.camera.as_mut().unwrap().fov_deg = 400.0;
+    assert!(bad.validate().unwrap_err().to_string().contains("fov_deg"));
+    // A state policy has no camera to check.
+    let state =
+        Policy::load(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/deploy_ppo"))
+            .unwrap();
+    assert_eq!(
+        ModelIo::for_policy(&state)
+            .unwrap()
+            .camera_mismatch(&calibration),
+        None
+    );
+}

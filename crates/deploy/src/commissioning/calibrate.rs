@@ -60,6 +60,7 @@ pub fn calibration_from_readings(
     let calibration = Calibration {
         robot: robot.to_string(),
         joints,
+        camera: None,
     };
     calibration.validate()?;
     Ok(calibration)

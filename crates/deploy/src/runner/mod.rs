@@ -244,6 +244,7 @@ impl Deployment {
             self.io.speed_scale_mismatch(&self.options.safety),
             self.io.gripper_mismatch(),
             self.observation_mismatch(),
+            self.io.camera_mismatch(&self.calibration),
         ]
         .into_iter()
         .flatten()

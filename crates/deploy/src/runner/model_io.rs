@@ -4,11 +4,12 @@
 //! registry builds it from the model's env id ([`fairgrasp_env::registry::ArmOffer`]), so the
 //! loop serves whichever task the registry offers for deployment.
 
-use crate::calibration::Calibration;
+use crate::calibration::{Calibration, CameraPose};
 use crate::error::{DeployError, Result};
 use crate::kinematics::ArmKinematics;
 use crate::safety::SafetyConfig;
 use fairgrasp_env::Env;
+use fairgrasp_env::arm::camera::CameraObsConfig;
 use fairgrasp_env::arm::erased::nominal_env;
 use fairgrasp_env::arm::{
     ActionMode, ArmState, Command, EstimatorFacts, MappingEvent, SuccessJudge,
@@ -36,6 +37,8 @@ pub struct ModelIo {
     pub control_period: f64,
     /// Control steps before the model's episodes were truncated in training.
     pub max_steps: u32,
+    /// The cameras a camera policy learnt with (`None`: the policy reads no images).
+    pub camera: Option<CameraObsConfig>,
     /// `(lower, upper)` joint limits of the arm (rad, the simulator's joints).
     pub limits_rad: Vec<(f32, f32)>,
 }
@@ -46,7 +49,15 @@ impl ModelIo {
     /// real world, which no source provides yet).
     pub fn for_policy(policy: &Policy) -> Result<Self> {
         let table = fairgrasp_rl::model::env_table(policy.env_config())?;
-        let io = Self::for_env(policy.env_id(), &table)?;
+        let mut io = Self::for_env(policy.env_id(), &table)?;
+        if policy.image_space().is_some() {
+            let camera = (table.get("camera").cloned())
+                .unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
+            io.camera =
+                Some(camera.try_into().map_err(|e| {
+                    DeployError::config("model", format!("its camera settings: {e}"))
+                })?);
+        }
         let inner = io.env.inner();
         if inner.observation_space().dim() != policy.obs_dim()
             || inner.action_space().dim() != policy.act_dim()
@@ -117,6 +128,7 @@ impl ModelIo {
             control_period: scene.control_period() as f64,
             max_steps: inner.max_episode_steps(),
             limits_rad: scene.arm_limits(),
+            camera: None,
             nominal,
             env,
         })
@@ -223,6 +235,70 @@ impl ModelIo {
              whole percent, the object's feed); expect it to grasp less often than in simulation \
              (train with configs/ppo_deploy.toml: docs/deployment.md)"
                 .into()
+        })
+    }
+
+    /// Why the cell's camera (the calibration file's `[camera]`) will not see the scene as
+    /// the camera policy learnt to, if it will not: its position, direction or field of view
+    /// outside the training's randomisation (5 mm, 1° without it), or no pose given.
+    pub fn camera_mismatch(&self, calibration: &Calibration) -> Option<String> {
+        let trained = self.camera.as_ref()?;
+        if !trained.scene.enabled {
+            return None;
+        }
+        let s = &trained.scene;
+        let Some(cell) = &calibration.camera else {
+            return Some(format!(
+                "the calibration file gives no [camera] pose: check that the scene camera sits \
+                 where the model's did (eye {:?} m, looking at {:?} m, field of view {}°)",
+                s.eye, s.target, s.fov_deg
+            ));
+        };
+        let r = &trained.randomize;
+        let (position, angle, fov) = if r.enabled {
+            (
+                r.position_jitter as f64,
+                r.angle_jitter_deg as f64,
+                r.fov_jitter_deg as f64,
+            )
+        } else {
+            (0.005, 1.0, 1.0)
+        };
+        let model = CameraPose {
+            eye: s.eye.map(f64::from),
+            target: s.target.map(f64::from),
+            fov_deg: s.fov_deg as f64,
+        };
+        let moved = (0..3)
+            .map(|i| (cell.eye[i] - model.eye[i]).abs())
+            .fold(0.0, f64::max);
+        let (a, b) = (cell.direction(), model.direction());
+        let cos = (0..3).map(|i| a[i] * b[i]).sum::<f64>().clamp(-1.0, 1.0);
+        let turned = cos.acos().to_degrees();
+        let wider = (cell.fov_deg - model.fov_deg).abs();
+        let mut problems = Vec::new();
+        if moved > position {
+            problems.push(format!(
+                "it sits {:.0} mm from the model's camera along an axis (trained within {:.0} mm)",
+                moved * 1000.0,
+                position * 1000.0
+            ));
+        }
+        if turned > angle {
+            problems.push(format!(
+                "it looks {turned:.1}° away from the model's direction (trained within {angle}°)"
+            ));
+        }
+        if wider > fov {
+            problems.push(format!(
+                "its field of view differs by {wider:.1}° (trained within {fov}°)"
+            ));
+        }
+        (!problems.is_empty()).then(|| {
+            format!(
+                "the cell's camera is not where the model learnt to see from: {}",
+                problems.join("; ")
+            )
         })
     }
 
