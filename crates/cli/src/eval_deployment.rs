@@ -31,6 +31,10 @@ pub struct DeploymentEvalArgs {
     /// With --deployment: encoder noise on the streamed joints (deg).
     #[arg(long, default_value_t = 0.05, requires = "deployment")]
     pub joint_noise_deg: f64,
+    /// With --deployment, for a camera policy: how long after its capture a frame reaches the
+    /// loop (ms; the camera takes one every 33 ms).
+    #[arg(long, default_value_t = 40.0, requires = "deployment")]
+    pub camera_delay_ms: f64,
     /// With --deployment: the controller as `fairgrasp twin --strict` sets it, as far as a
     /// simulated clock models it: drives 8 ms behind their set points with a 15 ms lag, and
     /// collision detection at 150 N (the network's faults are the real-time twin's).
@@ -64,6 +68,7 @@ pub fn run(args: &Run<'_>, d: &DeploymentEvalArgs) -> Result<()> {
     let settings = SimulatedSettings {
         latency_ms: [low, high],
         joint_noise_deg: d.joint_noise_deg,
+        camera_delay_ms: d.camera_delay_ms,
         seed: args.seed,
         ..SimulatedSettings::default()
     };

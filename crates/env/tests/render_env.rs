@@ -415,3 +415,69 @@ fn visual_randomisation_changes_the_look_per_episode_not_the_physics() {
         other => panic!("expected a config error, got {other:?}"),
     }
 }
+
+/// `camera.delay_steps`: the image shown is that of so many steps before (the episode's first
+/// standing for those before it), the physics untouched; a range draws the delay per episode.
+#[test]
+fn delayed_images_are_those_of_earlier_steps() {
+    let images = |delay: [u32; 2], seed: u64| {
+        let mut env = camera_env(|c| {
+            c.camera.mode = ObsMode::RgbState;
+            (c.camera.width, c.camera.height) = (32, 32);
+            c.camera.delay_steps = delay;
+        });
+        let mut out = Vec::new();
+        let mut obs = Vec::new();
+        for episode in 0..2 {
+            env.reset(Some(seed + episode)).unwrap();
+            out.push(env.image().unwrap().to_vec());
+            for k in 0..6 {
+                let a = [
+                    0.8,
+                    -0.5,
+                    -0.6,
+                    0.3,
+                    0.2,
+                    -0.4,
+                    if k < 3 { 1.0 } else { -1.0 },
+                ];
+                let step = env.step(&a).unwrap();
+                out.push(env.image().unwrap().to_vec());
+                obs.push(step.obs);
+            }
+        }
+        (out, obs)
+    };
+    let (now, obs) = images([0, 0], 7);
+    let (late, late_obs) = images([2, 2], 7);
+    assert_eq!(
+        obs, late_obs,
+        "the delay changes what is seen, not what happens"
+    );
+    assert_ne!(now[1], now[3], "the arm moves in view");
+    for episode in 0..2 {
+        let at = |k: usize| episode * 7 + k;
+        assert_eq!(late[at(0)], now[at(0)]);
+        assert_eq!(
+            late[at(1)],
+            now[at(0)],
+            "the first image stands for the steps before"
+        );
+        for k in 2..7 {
+            assert_eq!(late[at(k)], now[at(k - 2)], "episode {episode} step {k}");
+        }
+    }
+    // A range: each episode's delay is one of its values, drawn from the seed.
+    let (ranged, _) = images([0, 3], 11);
+    let (again, _) = images([0, 3], 11);
+    assert_eq!(ranged, again);
+    let bad = GraspConfig {
+        camera: fairgrasp_env::arm::camera::CameraObsConfig {
+            delay_steps: [3, 1],
+            ..Default::default()
+        },
+        ..GraspConfig::default()
+    };
+    let err = GraspEnv::new(bad).err().unwrap().to_string();
+    assert!(err.contains("camera.delay_steps"), "{err}");
+}

@@ -23,7 +23,8 @@ pub struct TwinCamera {
 
 impl TwinCamera {
     /// The cameras the environment settings `table` observe with (its `[camera]`), or `None`
-    /// when it observes no images. Visual randomisation is left off.
+    /// when it observes no images. Visual randomisation and the training's image delay are left
+    /// off.
     pub fn for_env(table: &toml::Table, scene: &Scene) -> Result<Option<Self>> {
         let mut config: CameraObsConfig = match table.get("camera") {
             Some(value) => value.clone().try_into().map_err(|e| {
@@ -32,6 +33,8 @@ impl TwinCamera {
             None => return Ok(None),
         };
         config.randomize.enabled = false;
+        // Frames are as fresh as drawn: the feed's delay is its own, in time.
+        config.delay_steps = [0, 0];
         Ok(Cameras::new(&config, scene)?.map(|cameras| Self { cameras }))
     }
 

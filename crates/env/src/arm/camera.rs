@@ -15,6 +15,7 @@ use fairgrasp_sim::scene::Scene;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
 use std::fmt;
 use std::str::FromStr;
 
@@ -257,7 +258,15 @@ pub struct CameraObsConfig {
     pub wrist: WristCameraConfig,
     /// Visual domain randomisation.
     pub randomize: VisualRandomization,
+    /// How many control steps old the images are: drawn per episode from this range
+    /// (inclusive). A camera's frame reaches a real loop after its exposure, readout and
+    /// transfer (the twin's camera: 40 ms, plus up to a 33 ms frame period): one to two
+    /// 33 ms control steps at speed scale 1. Images before the episode's first show its first.
+    pub delay_steps: [u32; 2],
 }
+
+/// The longest image delay accepted (control steps).
+pub const MAX_DELAY_STEPS: u32 = 8;
 
 impl Default for CameraObsConfig {
     fn default() -> Self {
@@ -270,6 +279,7 @@ impl Default for CameraObsConfig {
             scene: SceneCameraConfig::default(),
             wrist: WristCameraConfig::default(),
             randomize: VisualRandomization::default(),
+            delay_steps: [0, 0],
         }
     }
 }
@@ -335,6 +345,15 @@ impl CameraObsConfig {
         }
         Camera::new(self.wrist_camera(&Isometry3::identity()))
             .map_err(|e| camera_key("wrist", e))?;
+        let [lo, hi] = self.delay_steps;
+        if lo > hi || hi > MAX_DELAY_STEPS {
+            return Err(EnvError::config(
+                "camera.delay_steps",
+                format!(
+                    "must be [low, high] with low <= high <= {MAX_DELAY_STEPS}, got [{lo}, {hi}]"
+                ),
+            ));
+        }
         self.randomize.validate()
     }
 
@@ -404,6 +423,10 @@ pub struct Cameras {
     views: Vec<(Mount, Renderer, Jitter)>,
     space: ImageSpace,
     image: Vec<u8>,
+    /// The images of the episode's last steps, newest last (while they are delayed).
+    history: VecDeque<Vec<u8>>,
+    /// This episode's delay (control steps).
+    delay: usize,
     /// The stream of the visual randomisation (reseeded at every episode's start).
     rng: ChaCha8Rng,
 }
@@ -439,6 +462,8 @@ impl Cameras {
         }
         Ok(Some(Self {
             image: vec![0; space.len()],
+            history: VecDeque::new(),
+            delay: config.delay_steps[0] as usize,
             config: config.clone(),
             views,
             space,
@@ -451,25 +476,41 @@ impl Cameras {
         &self.space
     }
 
-    /// The images drawn last ([`ImageSpace::len`] bytes).
+    /// The images the policy sees now ([`ImageSpace::len`] bytes): those drawn last, or with
+    /// `camera.delay_steps`, those of that many steps before.
     pub fn image(&self) -> &[u8] {
-        &self.image
+        if self.history.is_empty() {
+            return &self.image;
+        }
+        let back = self.delay.min(self.history.len() - 1);
+        &self.history[self.history.len() - 1 - back]
     }
 
-    /// Whether visual domain randomisation draws anything (then [`Self::start_episode`] wants
-    /// a seed from the environment's stream).
+    /// Whether the episode's start draws anything (visual randomisation, a delay from a
+    /// range): then [`Self::start_episode`] wants a seed from the environment's stream.
     pub fn randomized(&self) -> bool {
-        self.config.randomize.enabled
+        let [lo, hi] = self.config.delay_steps;
+        self.config.randomize.enabled || lo < hi
     }
 
-    /// Draws the episode's look and camera changes from a stream seeded `seed` (nothing without
-    /// `camera.randomize.enabled`).
-    pub fn start_episode(&mut self, seed: u64) -> Result<()> {
+    /// Forgets the last episode's images, and with a `seed` (when [`Self::randomized`]) draws
+    /// the episode's delay, look and camera changes from a stream seeded with it.
+    pub fn start_episode(&mut self, seed: Option<u64>) -> Result<()> {
+        self.history.clear();
+        let Some(seed) = seed else {
+            return Ok(());
+        };
+        let [lo, hi] = self.config.delay_steps;
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        self.delay = if lo < hi {
+            self.rng.random_range(lo..=hi) as usize
+        } else {
+            lo as usize
+        };
         let r = self.config.randomize.clone();
         if !r.enabled {
             return Ok(());
         }
-        self.rng = ChaCha8Rng::seed_from_u64(seed);
         let rng = &mut self.rng;
         let azimuth = uniform(rng, r.light_azimuth_deg).to_radians();
         let elevation = uniform(rng, r.light_elevation_deg).to_radians();
@@ -565,6 +606,18 @@ impl Cameras {
                 let n: f32 = self.rng.random_range(-a..=a);
                 *v = (*v as f32 + n).round().clamp(0.0, 255.0) as u8;
             }
+        }
+        if self.config.delay_steps[1] > 0 {
+            // The first image of an episode stands for the steps before it.
+            let keep = self.delay + 1;
+            let mut frame = if self.history.len() >= keep {
+                self.history.pop_front().unwrap_or_default()
+            } else {
+                Vec::new()
+            };
+            frame.clear();
+            frame.extend_from_slice(&self.image);
+            self.history.push_back(frame);
         }
         Ok(())
     }

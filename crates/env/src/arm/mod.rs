@@ -680,9 +680,10 @@ impl<T: Task> Env for ArmEnv<T> {
             observed,
             privileged: privileged.clone(),
         });
-        if let Some(cameras) = self.cameras.as_mut().filter(|c| c.randomized()) {
+        if let Some(cameras) = self.cameras.as_mut() {
             // Drawn last, so that the episode's other draws are those of an unrandomised look.
-            cameras.start_episode(self.rng.random())?;
+            let seed = cameras.randomized().then(|| self.rng.random());
+            cameras.start_episode(seed)?;
         }
         self.capture()?;
         Ok((
