@@ -10,7 +10,7 @@ use super::simulated::SimulatedController;
 use crate::calibration::Calibration;
 use crate::error::Result;
 use crate::robot::{RobotCommand, RobotLink};
-use crate::runner::{DeployOptions, Deployment, JsonLog};
+use crate::runner::{DeployOptions, Deployment, EpisodeHost, JsonLog};
 use fairgrasp_rl::Policy;
 use std::path::Path;
 use std::sync::Arc;
@@ -68,6 +68,9 @@ pub fn evaluate(
         if let Some(fault) = report.fault {
             out.faults.push(fault.to_string());
             out.played += 1;
+            // The next placement first: an arm still pressing where it collided would raise
+            // the collision again at once and fail the next loop before it moved.
+            link.host_from(seed + out.played as u64).begin(0)?;
             link.clone().send(&RobotCommand::ResetAllError)?;
         }
     }
