@@ -693,3 +693,36 @@ fn short_runs_of_the_shipped_configs_train_pinned_weights() {
         moved.join("\n")
     );
 }
+
+/// The camera configs parse, their student settings checked against the teacher's
+/// environment (a bad `[distill.env]` key is named before anything trains).
+#[test]
+fn the_camera_configs_parse_with_their_students_settings() {
+    for (name, text) in [
+        (
+            "distill_grasp.toml",
+            include_str!("../../../configs/distill_grasp.toml"),
+        ),
+        (
+            "distill_deploy.toml",
+            include_str!("../../../configs/distill_deploy.toml"),
+        ),
+    ] {
+        let config = TrainConfig::from_toml_str(text, &[]).unwrap();
+        let distill = config
+            .distill
+            .as_ref()
+            .unwrap_or_else(|| panic!("{name}: no [distill]"));
+        let camera = distill.env["camera"].as_table().unwrap();
+        assert_eq!(camera["mode"].as_str(), Some("rgb+state"), "{name}");
+        let bad = ["distill.env.camera.delay_steps=[2, 1]".to_string()];
+        let err = TrainConfig::from_toml_str(text, &bad)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains("distill.env.camera.delay_steps"),
+            "{name}: {err}"
+        );
+    }
+}
