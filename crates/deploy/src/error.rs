@@ -66,3 +66,12 @@ impl DeployError {
 
 /// Result alias for the deployment layer.
 pub type Result<T, E = DeployError> = std::result::Result<T, E>;
+
+/// Whether a socket read or write gave up on its timeout (or would block): no data yet, not a
+/// failure.
+pub(crate) fn is_timeout(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+    )
+}

@@ -17,7 +17,7 @@
 //! frames of cameras the policy does not read are skipped. The deployment refuses images older
 //! than `safety.frame_deadline_ms` (by this machine's clock at arrival).
 
-use crate::error::{DeployError, Result};
+use crate::error::{DeployError, Result, is_timeout};
 use fairgrasp_env::spaces::ImageSpace;
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
@@ -317,13 +317,6 @@ impl Drop for TcpFrames {
 
 fn lock(s: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
     s.lock().unwrap_or_else(|p| p.into_inner())
-}
-
-fn is_timeout(e: &std::io::Error) -> bool {
-    matches!(
-        e.kind(),
-        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-    )
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 //! `orientation_xyzw` is optional (identity); `stamp` (seconds, the sender's clock) is
 //! optional and only logged.
 
-use crate::error::{DeployError, Result};
+use crate::error::{DeployError, Result, is_timeout};
 use fairgrasp_sim::rapier3d::na::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufReader};
@@ -240,13 +240,6 @@ fn store(s: &Mutex<Shared>, text: &str) {
         }
         Err(e) => s.error = Some(e.to_string()),
     }
-}
-
-fn is_timeout(e: &std::io::Error) -> bool {
-    matches!(
-        e.kind(),
-        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-    )
 }
 
 fn net_error(call: &str, addr: &str, e: std::io::Error) -> DeployError {

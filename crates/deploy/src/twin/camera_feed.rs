@@ -4,17 +4,16 @@
 //! every client connected to a TCP port. The look is the nominal one: a real cell's camera has
 //! one light and one set of colours, not the training's randomised draws.
 
+use super::periodic_server::PeriodicServer;
 use crate::error::{DeployError, Result};
 use crate::frame_source::{FrameHeader, write_frame};
 use fairgrasp_env::arm::camera::{CameraObsConfig, Cameras};
 use fairgrasp_env::spaces::ImageSpace;
 use fairgrasp_sim::scene::Scene;
 use std::io;
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::net::{SocketAddr, TcpStream};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The cameras of a staged environment, drawing frames of its scene.
 pub struct TwinCamera {
@@ -71,76 +70,39 @@ const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 
 /// A running feed; stops when dropped.
 pub struct CameraFeed {
-    addr: SocketAddr,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    server: PeriodicServer,
 }
 
 impl CameraFeed {
     /// Listens on `bind` (port 0: any free port) and sends every `period`.
     pub fn spawn(bind: SocketAddr, period: Duration, source: FramesFn) -> io::Result<Self> {
-        let listener = TcpListener::bind(bind)?;
-        listener.set_nonblocking(true)?;
-        let addr = listener.local_addr()?;
-        let stop = Arc::new(AtomicBool::new(false));
-        let thread = {
-            let stop = stop.clone();
-            std::thread::Builder::new()
-                .name("twin-camera-feed".into())
-                .spawn(move || run(listener, period, source, stop))?
+        // Blocking writes with a deadline: a frame is sent whole or the client is dropped.
+        let prepare = |stream: &TcpStream| {
+            stream.set_nonblocking(false)?;
+            stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
+            stream.set_nodelay(true)
         };
-        Ok(Self {
-            addr,
-            stop,
-            thread: Some(thread),
-        })
-    }
-
-    /// The TCP address clients connect to.
-    pub fn local_addr(&self) -> SocketAddr {
-        self.addr
-    }
-}
-
-impl Drop for CameraFeed {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-fn run(listener: TcpListener, period: Duration, source: FramesFn, stop: Arc<AtomicBool>) {
-    let mut clients: Vec<TcpStream> = Vec::new();
-    let mut next = Instant::now();
-    while !stop.load(Ordering::SeqCst) {
-        while let Ok((stream, _)) = listener.accept() {
-            // Blocking writes with a deadline: a frame is sent whole or the client is dropped.
-            let ready = stream.set_nonblocking(false).is_ok()
-                && stream.set_write_timeout(Some(WRITE_TIMEOUT)).is_ok();
-            if ready {
-                let _ = stream.set_nodelay(true);
-                clients.push(stream);
+        let tick = move |clients: &mut Vec<TcpStream>| {
+            if clients.is_empty() {
+                return;
             }
-        }
-        if !clients.is_empty()
-            && let Some(frames) = source()
-        {
+            let Some(frames) = source() else {
+                return;
+            };
             let mut bytes = Vec::new();
             for (header, pixels) in &frames {
                 // Sizes come from the camera that drew the pixels.
                 let _ = write_frame(&mut bytes, header, pixels);
             }
             clients.retain_mut(|c| io::Write::write_all(c, &bytes).is_ok());
-        }
-        next += period;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
+        };
+        let server = PeriodicServer::spawn("twin-camera-feed", bind, period, prepare, tick)?;
+        Ok(Self { server })
+    }
+
+    /// The TCP address clients connect to.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.server.local_addr()
     }
 }
 

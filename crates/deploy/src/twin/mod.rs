@@ -38,6 +38,7 @@ pub mod evaluation;
 pub mod faults;
 pub mod gripper;
 pub mod motion;
+mod periodic_server;
 pub mod pose_feed;
 pub mod service;
 pub mod servo_udp;

@@ -2,22 +2,19 @@
 //! [`PoseMessage`] JSON lines (robot base frame, metres) at about 30 Hz — to every client
 //! connected to a TCP port, and optionally as UDP datagrams (one message each) to an address.
 
+use super::periodic_server::PeriodicServer;
 use crate::pose_source::PoseMessage;
 use std::io::{self, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
+use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Where the feed's messages come from: `None` while there is no object.
 pub type PoseSourceFn = Arc<dyn Fn() -> Option<PoseMessage> + Send + Sync>;
 
 /// A running feed; stops when dropped.
 pub struct PoseFeed {
-    addr: SocketAddr,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    server: PeriodicServer,
 }
 
 impl PoseFeed {
@@ -28,9 +25,6 @@ impl PoseFeed {
         period: Duration,
         source: PoseSourceFn,
     ) -> io::Result<Self> {
-        let listener = TcpListener::bind(bind)?;
-        listener.set_nonblocking(true)?;
-        let addr = listener.local_addr()?;
         let udp = match udp_target {
             Some(target) => {
                 let any: SocketAddr = if target.is_ipv4() {
@@ -42,69 +36,29 @@ impl PoseFeed {
             }
             None => None,
         };
-        let stop = Arc::new(AtomicBool::new(false));
-        let thread = {
-            let stop = stop.clone();
-            std::thread::Builder::new()
-                .name("twin-pose-feed".into())
-                .spawn(move || run(listener, udp, period, source, stop))?
+        // Non-blocking writes: a client that stops reading is dropped, not waited for.
+        let prepare = |stream: &TcpStream| {
+            stream.set_nonblocking(true)?;
+            stream.set_nodelay(true)
         };
-        Ok(Self {
-            addr,
-            stop,
-            thread: Some(thread),
-        })
-    }
-
-    /// The TCP address clients connect to.
-    pub fn local_addr(&self) -> SocketAddr {
-        self.addr
-    }
-}
-
-impl Drop for PoseFeed {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-fn run(
-    listener: TcpListener,
-    udp: Option<(UdpSocket, SocketAddr)>,
-    period: Duration,
-    source: PoseSourceFn,
-    stop: Arc<AtomicBool>,
-) {
-    let mut clients: Vec<TcpStream> = Vec::new();
-    let mut next = Instant::now();
-    while !stop.load(Ordering::SeqCst) {
-        while let Ok((stream, _)) = listener.accept() {
-            // Non-blocking writes: a client that stops reading is dropped, not waited for.
-            if stream.set_nonblocking(true).is_ok() {
-                let _ = stream.set_nodelay(true);
-                clients.push(stream);
-            }
-        }
-        if let Some(message) = source()
-            && let Ok(json) = serde_json::to_string(&message)
-        {
+        let tick = move |clients: &mut Vec<TcpStream>| {
+            let Some(json) = source().and_then(|m| serde_json::to_string(&m).ok()) else {
+                return;
+            };
             let line = format!("{json}\n");
             clients.retain_mut(|c| c.write_all(line.as_bytes()).is_ok());
             if let Some((socket, target)) = &udp {
                 // A lost datagram is what UDP means; the next one follows in a period.
                 let _ = socket.send_to(json.as_bytes(), target);
             }
-        }
-        next += period;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
+        };
+        let server = PeriodicServer::spawn("twin-pose-feed", bind, period, prepare, tick)?;
+        Ok(Self { server })
+    }
+
+    /// The TCP address clients connect to.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.server.local_addr()
     }
 }
 

@@ -5,6 +5,7 @@
 use super::fields::{Layout, PERIOD_RANGE_MS};
 use super::frame::{Frame, FrameDecoder, FrameType, SDK_RECV_SIZE, encode_output_config};
 use super::state::decode_state_into;
+use crate::error::is_timeout;
 use crate::robot::{RobotState, StampedState};
 use crate::{DeployError, Result};
 use std::io::{ErrorKind, Read, Write};
@@ -286,10 +287,6 @@ fn read_frame(
             Err(e) => return Err(Failure::Network(describe(&e))),
         }
     }
-}
-
-fn is_timeout(e: &std::io::Error) -> bool {
-    matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut)
 }
 
 fn describe(e: &std::io::Error) -> String {

@@ -8,6 +8,7 @@
 use super::fields::{Layout, PERIOD_RANGE_MS, field};
 use super::frame::{Frame, FrameDecoder, FrameType, SDK_RECV_SIZE, parse_output_config};
 use super::state::encode_state_with;
+use crate::error::is_timeout;
 use crate::robot::RobotState;
 use socket2::SockRef;
 use std::io::{self, ErrorKind, Read, Write};
@@ -306,10 +307,6 @@ impl Connection {
         let bytes = frame.encode().map_err(io::Error::other)?;
         self.stream.write_all(&bytes)
     }
-}
-
-fn is_timeout(e: &io::Error) -> bool {
-    matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut)
 }
 
 /// What a client has asked for, and when its next DATA frame is due.
