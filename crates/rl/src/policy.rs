@@ -141,36 +141,12 @@ impl Policy {
         images: Option<&[u8]>,
         deterministic: bool,
     ) -> Result<Vec<f32>> {
-        let Some(space) = self.image_space().cloned() else {
-            return self.act_batch(obs, deterministic);
-        };
         let dim = self.meta.obs_dim;
-        let rows = obs.len() / dim;
-        if obs.is_empty() || !obs.len().is_multiple_of(dim) {
-            return Err(self.error(format!(
-                "{} state values are not whole observations of {dim} values",
-                obs.len()
-            )));
-        }
-        let Some(images) = images else {
-            return Err(self.error(format!(
-                "the model reads camera images ({}); none were given",
-                space.describe()
-            )));
+        let result = match &mut self.actor {
+            Actor::Vector(_) => return self.act_batch(obs, deterministic),
+            Actor::Pixel(actor, cache) => pixel_actions(actor, cache, obs, dim, images),
         };
-        if images.len() != rows * space.len() {
-            return Err(self.error(format!(
-                "{} image bytes for {rows} observation(s); the model reads {} bytes each ({})",
-                images.len(),
-                space.len(),
-                space.describe()
-            )));
-        }
-        check_finite(obs, dim).map_err(|e| self.error(e))?;
-        let Actor::Pixel(actor, cache) = &mut self.actor else {
-            unreachable!("matched above")
-        };
-        Ok(actor.forward(obs, images, rows, cache)?)
+        result.map_err(|e| self.error(e))
     }
 
     fn act_rows(&mut self, obs: &[f32], deterministic: bool) -> Result<Vec<f32>> {
@@ -315,4 +291,38 @@ fn check_finite(obs: &[f32], dim: usize) -> std::result::Result<(), String> {
         i % dim,
         obs[i]
     ))
+}
+
+/// A camera policy's actions for whole observations, their state and images checked first.
+fn pixel_actions(
+    actor: &PixelActor,
+    cache: &mut PixelCache,
+    obs: &[f32],
+    dim: usize,
+    images: Option<&[u8]>,
+) -> std::result::Result<Vec<f32>, String> {
+    let space = actor.images();
+    if obs.is_empty() || !obs.len().is_multiple_of(dim) {
+        return Err(format!(
+            "{} state values are not whole observations of {dim} values",
+            obs.len()
+        ));
+    }
+    let rows = obs.len() / dim;
+    let Some(images) = images else {
+        return Err(format!(
+            "the model reads camera images ({}); none were given",
+            space.describe()
+        ));
+    };
+    if images.len() != rows * space.len() {
+        return Err(format!(
+            "{} image bytes for {rows} observation(s); the model reads {} bytes each ({})",
+            images.len(),
+            space.len(),
+            space.describe()
+        ));
+    }
+    check_finite(obs, dim)?;
+    (actor.forward(obs, images, rows, cache)).map_err(|e| e.to_string())
 }
