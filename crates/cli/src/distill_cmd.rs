@@ -103,12 +103,19 @@ pub fn distill_and_report(
     let (summary, student) = run_stage(teacher, student_dir, config, seed, &mut on_round)
         .with_context(|| format!("distilling {}", teacher.display()))?;
     println!(
-        "student: {}/{} held-out episodes succeeded; {} parameters, {} labelled states; distilled in {:.0} s (into {})",
+        "student: {}/{} held-out episodes succeeded; {} parameters, {} labelled states; distilled in {:.0} s (env steps {:.0} s, acting {:.0} s, student forward {:.0} s, backward and Adam {:.0} s; peak memory {}) into {}",
         summary.successes,
         summary.episodes,
         summary.parameters,
         summary.samples,
         summary.distill_seconds,
+        summary.env_seconds,
+        summary.act_seconds,
+        summary.forward_seconds,
+        summary.backward_seconds,
+        summary
+            .peak_memory_mib
+            .map_or("unknown".into(), |m| format!("{m:.0} MiB")),
         student_dir.display()
     );
     Ok(student)

@@ -4,7 +4,9 @@
 use anyhow::{Context, Result, bail};
 use fairgrasp_rl::Algo;
 use fairgrasp_rl::configs::builtin_table;
+use fairgrasp_rl::ppo::pixel::PixelIteration;
 use fairgrasp_rl::train::RunDir;
+use fairgrasp_rl::train::pixel::run_pixel_ppo;
 use fairgrasp_rl::train::{Progress, TrainConfig, TrainSummary, resume_until, train_until};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::ops::ControlFlow;
@@ -150,8 +152,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         config.seed,
         run_dir.display()
     );
-    let mut reporter = Reporter::new(args.quiet);
     let stop = stop_on_ctrl_c()?;
+    if config.pixel_ppo.is_some() {
+        return train_pixel(&config, &run_dir, args.quiet, &stop);
+    }
+    let mut reporter = Reporter::new(args.quiet);
     let summary = train_until(&config, &run_dir, |p| reporter.update_until(p, &stop))?;
     reporter.finish();
     print_summary(&summary)?;
@@ -173,6 +178,55 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         )
         .map(|_| ())?;
     }
+    Ok(())
+}
+
+/// `[pixel_ppo]`: the camera policy trained end to end, a line per iteration, then its
+/// held-out success.
+fn train_pixel(
+    config: &TrainConfig,
+    run_dir: &std::path::Path,
+    quiet: bool,
+    stop: &AtomicBool,
+) -> Result<()> {
+    let mut on_iteration = |it: &PixelIteration| {
+        if !quiet {
+            println!(
+                "{:>9} steps: {}/{} rollout episodes succeeded, std {:.3}, value loss {:.4}, KL {:.4} (env {:.1} s, act {:.1} s, update {:.1} s)",
+                it.timesteps,
+                it.successes,
+                it.episodes,
+                it.std,
+                it.value_loss,
+                it.approx_kl,
+                it.env_seconds,
+                it.act_seconds,
+                it.update_seconds
+            );
+        }
+        match stop.load(Ordering::SeqCst) {
+            true => ControlFlow::Break(()),
+            false => ControlFlow::Continue(()),
+        }
+    };
+    let (summary, _) = run_pixel_ppo(config, run_dir, &mut on_iteration)
+        .with_context(|| format!("training a camera policy into {}", run_dir.display()))?;
+    println!(
+        "camera policy: {}/{} held-out episodes succeeded after {} steps in {:.0} s (env steps {:.0} s, acting {:.0} s, update {:.0} s of which the actor's forward {:.0} s, backward and Adam {:.0} s; peak memory {}); model in {}",
+        summary.successes,
+        summary.episodes,
+        summary.num_timesteps,
+        summary.seconds,
+        summary.env_seconds,
+        summary.act_seconds,
+        summary.update_seconds,
+        summary.forward_seconds,
+        summary.backward_seconds,
+        summary
+            .peak_memory_mib
+            .map_or("unknown".into(), |m| format!("{m:.0} MiB")),
+        RunDir::new(run_dir).final_model().display()
+    );
     Ok(())
 }
 

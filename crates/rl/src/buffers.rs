@@ -37,6 +37,10 @@ pub struct RolloutBuffer {
     pub privileged_dim: usize,
     /// Each observation's privileged state, as the value network read it.
     pub privileged: Vec<f32>,
+    /// Bytes of camera images per transition (0: none).
+    pub image_len: usize,
+    /// Each observation's camera images, as the cameras gave them (`u8`, no float copy).
+    pub images: Vec<u8>,
     len: usize,
 }
 
@@ -59,6 +63,8 @@ impl RolloutBuffer {
             returns: vec![0.0; n],
             privileged_dim: 0,
             privileged: Vec::new(),
+            image_len: 0,
+            images: Vec::new(),
             len: 0,
         }
     }
@@ -68,6 +74,21 @@ impl RolloutBuffer {
         self.privileged_dim = dim;
         self.privileged = vec![0.0; self.n_steps * self.n_envs * dim];
         self
+    }
+
+    /// The buffer, also storing `len` bytes of camera images per transition.
+    pub fn with_images(mut self, len: usize) -> Self {
+        self.image_len = len;
+        self.images = vec![0; self.n_steps * self.n_envs * len];
+        self
+    }
+
+    /// Stores the images of the step [`Self::push`] is about to store (`n_envs × image_len`
+    /// bytes).
+    pub fn push_images(&mut self, images: &[u8]) {
+        assert!(!self.is_full(), "rollout buffer is full");
+        let (n, t, l) = (self.n_envs, self.len, self.image_len);
+        self.images[t * n * l..(t + 1) * n * l].copy_from_slice(images);
     }
 
     /// Transitions stored so far (steps × envs).

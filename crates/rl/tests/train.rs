@@ -726,3 +726,33 @@ fn the_camera_configs_parse_with_their_students_settings() {
         );
     }
 }
+
+/// The end-to-end camera config parses into a camera env with a PPO learner, refuses another
+/// algorithm or a second way to the camera policy by key, and the state-policy loop refuses it.
+#[test]
+fn the_end_to_end_camera_config_parses_and_is_refused_where_it_cannot_run() {
+    let text = include_str!("../../../configs/pixel_ppo_grasp.toml");
+    let config = TrainConfig::from_toml_str(text, &[]).unwrap();
+    assert!(config.pixel_ppo.is_some());
+    let camera = config.env["camera"].as_table().unwrap();
+    assert_eq!(camera["mode"].as_str(), Some("rgb+state"));
+    let mut sac = config.clone();
+    sac.algo = fairgrasp_rl::algo::AlgoConfig::default_for(Algo::Sac);
+    let err = sac.validate().err().unwrap().to_string();
+    assert!(
+        err.contains("pixel_ppo") && err.contains("algo = \"ppo\""),
+        "{err}"
+    );
+    let both = format!("{text}\n[distill]\nrounds = 2\n");
+    let err = TrainConfig::from_toml_str(&both, &[])
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("not both"), "{err}");
+    let dir = tempfile::tempdir().unwrap();
+    let err = fairgrasp_rl::train::train(&config, dir.path(), |_| {})
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("run_pixel_ppo"), "{err}");
+}

@@ -140,6 +140,16 @@ pub struct RoundReport {
     pub collect_seconds: f64,
     /// Seconds spent training.
     pub train_seconds: f64,
+    /// The parts: stepping the environments (physics and rendering, on their threads) and
+    /// the teacher's and student's actions while collecting; the student's forward passes,
+    /// and its backward passes with Adam's steps, while training.
+    pub env_seconds: f64,
+    /// See [`Self::env_seconds`].
+    pub act_seconds: f64,
+    /// See [`Self::env_seconds`].
+    pub forward_seconds: f64,
+    /// See [`Self::env_seconds`].
+    pub backward_seconds: f64,
 }
 
 /// The labelled states: the student's inputs and the teacher's actions.
@@ -273,7 +283,9 @@ pub fn distill<E: Env>(
         let beta = config.beta(round);
         let started = Instant::now();
         let (mut episodes, mut successes) = (0, 0);
+        let (mut env_seconds, mut act_seconds) = (0.0, 0.0);
         for _ in 0..config.steps_per_round {
+            let acting = Instant::now();
             let labels = teacher(&privileged)?;
             let states = envs.observations().to_vec();
             let frames = envs.images().to_vec();
@@ -294,7 +306,10 @@ pub fn distill<E: Env>(
                     row.copy_from_slice(&own[i * act_dim..(i + 1) * act_dim]);
                 }
             }
+            act_seconds += acting.elapsed().as_secs_f64();
+            let stepping = Instant::now();
             let step = envs.step(&actions)?;
+            env_seconds += stepping.elapsed().as_secs_f64();
             for i in 0..n {
                 let info = match &step.episode_ends[i] {
                     Some(end) => {
@@ -314,6 +329,7 @@ pub fn distill<E: Env>(
         data.keep_last(config.max_samples);
         let collect_seconds = started.elapsed().as_secs_f64();
         let started = Instant::now();
+        let (forward_before, backward_before) = (cache.forward_seconds, cache.backward_seconds);
         let mut order: Vec<usize> = (0..data.len()).collect();
         let mut loss = 0.0;
         for _ in 0..config.epochs.max(1) {
@@ -357,6 +373,10 @@ pub fn distill<E: Env>(
             successes,
             collect_seconds,
             train_seconds: started.elapsed().as_secs_f64(),
+            env_seconds,
+            act_seconds,
+            forward_seconds: cache.forward_seconds - forward_before,
+            backward_seconds: cache.backward_seconds - backward_before,
         };
         if on_round(&report, &student).is_break() {
             break;

@@ -31,6 +31,16 @@ pub struct StudentSummary {
     pub parameters: usize,
     /// Labelled states the student learnt from.
     pub samples: usize,
+    /// The distillation's time split (s, summed over rounds; [`RoundReport`]'s parts).
+    pub env_seconds: f64,
+    /// See [`Self::env_seconds`].
+    pub act_seconds: f64,
+    /// See [`Self::env_seconds`].
+    pub forward_seconds: f64,
+    /// See [`Self::env_seconds`].
+    pub backward_seconds: f64,
+    /// Peak resident memory of the process (MiB), where the system reports it.
+    pub peak_memory_mib: Option<f64>,
 }
 
 /// The student's environment: the teacher's settings with `camera.mode = "rgb+state"`, then
@@ -71,8 +81,18 @@ pub fn run_stage(
     let teacher_dim = teacher.obs_dim();
     let mut label = |rows: &[f32]| teacher.act_batch(rows, true);
     let mut samples = 0;
+    let mut split = [0.0f64; 4];
     let mut watch = |r: &RoundReport, s: &PixelActor| {
         samples = r.samples;
+        let parts = [
+            r.env_seconds,
+            r.act_seconds,
+            r.forward_seconds,
+            r.backward_seconds,
+        ];
+        for (total, part) in split.iter_mut().zip(parts) {
+            *total += part;
+        }
         on_round(r, s)
     };
     let student = distill(&mut label, teacher_dim, &mut envs, config, seed, &mut watch)?;
@@ -113,6 +133,11 @@ pub fn run_stage(
         eval_seconds: started.elapsed().as_secs_f64(),
         parameters: student.pixel_actor().map_or(0, PixelActor::parameter_count),
         samples,
+        env_seconds: split[0],
+        act_seconds: split[1],
+        forward_seconds: split[2],
+        backward_seconds: split[3],
+        peak_memory_mib: crate::train::peak_memory_mib(),
     };
     let json = serde_json::to_string_pretty(&summary).map_err(|e| RlError::Other(e.to_string()))?;
     let path = student_dir.join("summary.json");

@@ -15,6 +15,7 @@ use candle_nn::VarMap;
 use fairgrasp_env::spaces::ImageSpace;
 use rand::{Rng, RngCore};
 use serde::{Deserialize, Serialize};
+use std::time::Instant;
 
 /// The shape of a pixel actor (`[distill.actor]`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -53,6 +54,11 @@ pub struct PixelCache {
     d_head: Vec<f32>,
     d_next: Vec<f32>,
     batch: usize,
+    /// Seconds of [`PixelActor::step_on`]'s forward passes and of its backward passes with
+    /// Adam's steps, summed over the calls with this cache (the time split of a run).
+    pub forward_seconds: f64,
+    /// See [`Self::forward_seconds`].
+    pub backward_seconds: f64,
 }
 
 /// The pixel policy: encoders, standardisation of the state and the head (see the module).
@@ -365,16 +371,58 @@ impl PixelActor {
         cache: &mut PixelCache,
     ) -> candle_core::Result<f32> {
         let batch = targets.len() / self.act_dim;
+        let n = (batch * self.act_dim) as f32;
+        let mut mse = |out: &[f32], d_out: &mut Vec<f32>| {
+            let mut loss = 0.0f64;
+            d_out.clear();
+            for (y, t) in out.iter().zip(targets) {
+                let e = y - t;
+                loss += (e * e) as f64;
+                d_out.push(2.0 * e / n);
+            }
+            (loss / n as f64) as f32
+        };
+        self.step_on(adam, states, images, batch, cache, 10.0, &mut mse)
+    }
+
+    /// One Adam step on any loss of the batch's actions: `loss` gets the actions (`batch ×
+    /// act_dim`), writes the loss's gradient with respect to them into its second argument and
+    /// returns the loss, which this returns. The gradients' global norm is clipped to
+    /// `max_grad_norm`; `adam` must be built on [`Self::varmap`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn step_on(
+        &self,
+        adam: &mut Adam,
+        states: &[f32],
+        images: &[u8],
+        batch: usize,
+        cache: &mut PixelCache,
+        max_grad_norm: f64,
+        loss: &mut dyn FnMut(&[f32], &mut Vec<f32>) -> f32,
+    ) -> candle_core::Result<f32> {
         let tensors = self.tensors();
         let mut grads: Vec<Vec<f32>> = tensors.iter().map(|t| vec![0.0; t.elem_count()]).collect();
-        let loss;
+        let value;
+        let mut started;
         {
             let values = VarValues::new(tensors.iter());
             let params: Vec<&[f32]> = (0..tensors.len())
                 .map(|i| values.get(i))
                 .collect::<candle_core::Result<_>>()?;
+            started = Instant::now();
             self.forward_with(&params, states, images, batch, cache);
-            loss = self.backward(&params, targets, cache, &mut grads);
+            let out = cache.head.last().expect("forward ran");
+            value = loss(out, &mut cache.d_head);
+            cache.forward_seconds += started.elapsed().as_secs_f64();
+            if cache.d_head.len() != batch * self.act_dim {
+                candle_core::bail!(
+                    "the loss gave {} gradient values for {batch} × {} actions",
+                    cache.d_head.len(),
+                    self.act_dim
+                );
+            }
+            started = Instant::now();
+            self.backward(&params, cache, &mut grads);
         }
         // Adam takes the gradients in its own (name-sorted) order.
         let order: Vec<usize> = adam
@@ -384,28 +432,14 @@ impl PixelActor {
             .ok_or_else(|| candle_core::Error::Msg("adam is not over this actor".into()))?;
         let sorted: Vec<Option<&[f32]>> =
             order.iter().map(|&i| Some(grads[i].as_slice())).collect();
-        adam.step_with(&sorted, 10.0)?;
-        Ok(loss)
+        adam.step_with(&sorted, max_grad_norm)?;
+        cache.backward_seconds += started.elapsed().as_secs_f64();
+        Ok(value)
     }
 
-    /// The loss's gradients into `grads` (pass order); returns the loss.
-    fn backward(
-        &self,
-        params: &[&[f32]],
-        targets: &[f32],
-        cache: &mut PixelCache,
-        grads: &mut [Vec<f32>],
-    ) -> f32 {
+    /// The gradients into `grads` (pass order) from the actions' gradient in `cache.d_head`.
+    fn backward(&self, params: &[&[f32]], cache: &mut PixelCache, grads: &mut [Vec<f32>]) {
         let batch = cache.batch;
-        let out = cache.head.last().expect("forward ran");
-        let n = (batch * self.act_dim) as f32;
-        let mut loss = 0.0f64;
-        cache.d_head.clear();
-        for (y, t) in out.iter().zip(targets) {
-            let e = y - t;
-            loss += (e * e) as f64;
-            cache.d_head.push(2.0 * e / n);
-        }
         let offset: usize = self.encoders.iter().map(CnnEncoder::param_count).sum();
         for (l, &(inp, out)) in self.head.iter().enumerate().rev() {
             if l + 1 < self.head.len() {
@@ -445,7 +479,6 @@ impl PixelActor {
             );
             start += count;
         }
-        (loss / n as f64) as f32
     }
 }
 
@@ -573,7 +606,14 @@ mod tests {
         let refs: Vec<&[f32]> = params.iter().map(Vec::as_slice).collect();
         actor.forward_with(&refs, &states, &images, 3, &mut cache);
         let mut grads: Vec<Vec<f32>> = params.iter().map(|p| vec![0.0; p.len()]).collect();
-        actor.backward(&refs, &targets, &mut cache, &mut grads);
+        let n = targets.len() as f32;
+        let out = cache.head.last().unwrap();
+        cache.d_head = out
+            .iter()
+            .zip(&targets)
+            .map(|(y, t)| 2.0 * (y - t) / n)
+            .collect();
+        actor.backward(&refs, &mut cache, &mut grads);
         let eps = 2e-3;
         for p in 0..params.len() {
             for i in (0..params[p].len()).step_by(params[p].len() / 4 + 1) {

@@ -11,6 +11,7 @@
 //! `VecNormalize` normalises observations; the policy reads the observation alone.
 
 pub mod fused_loss;
+pub mod pixel;
 
 use crate::algorithm::{
     Algorithm, TensorMap, load_varmap, rng_from_state, rng_state, varmap_tensors,

@@ -3,6 +3,7 @@
 use crate::algo::AlgoConfig;
 use crate::distill::DistillConfig;
 use crate::error::{Result, RlError};
+use crate::ppo::pixel::PixelPpoConfig;
 use fairgrasp_env::registry;
 use fairgrasp_env::wrappers::VecNormalizeConfig;
 use serde::{Deserialize, Serialize};
@@ -94,6 +95,10 @@ pub struct TrainConfig {
     /// (teacher–student distillation, docs/camera.md); absent: no camera policy.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distill: Option<DistillConfig>,
+    /// `[pixel_ppo]`: train a camera policy end to end with PPO instead (its critic reads the
+    /// privileged state; `[ppo]` holds the PPO settings); absent: a state policy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_ppo: Option<PixelPpoConfig>,
 }
 
 impl Default for TrainConfig {
@@ -111,6 +116,7 @@ impl Default for TrainConfig {
             eval: EvalConfig::default(),
             env: toml::Table::new(),
             distill: None,
+            pixel_ppo: None,
         }
     }
 }
@@ -199,6 +205,20 @@ impl TrainConfig {
             fairgrasp_env::config::overlay(&mut student, &camera);
             fairgrasp_env::config::overlay(&mut student, &distill.env);
             check("distill.env", &student)?;
+        }
+        if self.pixel_ppo.is_some() {
+            if !matches!(self.algo, AlgoConfig::Ppo(_)) {
+                return bad(
+                    "pixel_ppo",
+                    "end-to-end camera training runs PPO: algo = \"ppo\"",
+                );
+            }
+            if self.distill.is_some() {
+                return bad(
+                    "pixel_ppo",
+                    "a run trains its camera policy one way: [pixel_ppo] or [distill], not both",
+                );
+            }
         }
         if !self.eval.env.is_empty() {
             let eval_env = self.eval_env();

@@ -9,6 +9,7 @@
 
 pub mod callbacks;
 pub mod config;
+pub mod pixel;
 pub mod run_dir;
 
 use crate::algo::{LearnerShape, LearnerVisitor};
@@ -102,6 +103,14 @@ pub fn train_with<'c>(
     callbacks: Vec<Box<dyn Callback + 'c>>,
 ) -> Result<TrainSummary> {
     config.validate()?;
+    if config.pixel_ppo.is_some() {
+        return Err(RlError::Config {
+            key: "pixel_ppo".into(),
+            problem: "a camera policy trained end to end runs through `fairgrasp train` \
+                      (train::pixel::run_pixel_ppo), not this state-policy loop"
+                .into(),
+        });
+    }
     let dir = RunDir::new(run_dir);
     let io = |e: std::io::Error| RlError::Other(format!("{}: {e}", run_dir.display()));
     std::fs::create_dir_all(run_dir).map_err(io)?;
