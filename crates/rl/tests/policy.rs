@@ -433,7 +433,10 @@ fn a_loaded_camera_policy_acts_on_state_and_images_as_its_network() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
     let mut actor = PixelActor::new(&actor_config, &images, state_dim, act_dim, &mut rng).unwrap();
     let (obs, _) = env.reset(Some(4)).unwrap();
-    actor.fit_state_scale(&[obs.clone(), obs.iter().map(|v| v + 0.5).collect()].concat());
+    actor.fit_state_scale(
+        &[obs.clone(), obs.iter().map(|v| v + 0.5).collect()].concat(),
+        1e-3,
+    );
     let meta = ModelMeta {
         format_version: FORMAT_VERSION,
         algo: AlgoConfig::default(),

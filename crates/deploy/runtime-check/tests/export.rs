@@ -531,7 +531,7 @@ fn onnx_camera_policy_on_state_and_images_matches_our_inference() {
         };
     }
     let n = states.len() / state_dim;
-    actor.fit_state_scale(&states);
+    actor.fit_state_scale(&states, 1e-3);
     // Output weights 300 times the initial scale, so that actions leave [-1, 1].
     let mut weights = actor.weights();
     let last = format!("head.{}.weight", actor_config.net_arch.len());

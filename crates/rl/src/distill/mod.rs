@@ -324,7 +324,7 @@ pub fn distill<E: Env>(
             }
         }
         if round == 0 {
-            student.fit_state_scale(&data.states);
+            student.fit_state_scale(&data.states, 1e-3);
         }
         data.keep_last(config.max_samples);
         let collect_seconds = started.elapsed().as_secs_f64();

@@ -261,8 +261,8 @@ impl PixelActor {
     }
 
     /// Sets the state's standardisation from `states` (`rows × state_dim`): per value its mean
-    /// and standard deviation (at least 1e-3, so that constant values stay finite).
-    pub fn fit_state_scale(&mut self, states: &[f32]) {
+    /// and standard deviation, at least `floor` (so that constant values stay finite).
+    pub fn fit_state_scale(&mut self, states: &[f32], floor: f32) {
         let rows = states.len() / self.state_dim.max(1);
         if rows == 0 {
             return;
@@ -272,7 +272,7 @@ impl PixelActor {
             let mean = column.clone().map(|&v| v as f64).sum::<f64>() / rows as f64;
             let var = column.map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / rows as f64;
             self.state_mean[j] = mean as f32;
-            self.state_std[j] = (var.sqrt() as f32).max(1e-3);
+            self.state_std[j] = (var.sqrt() as f32).max(floor);
         }
     }
 
@@ -538,7 +538,7 @@ mod tests {
         let mut actor = PixelActor::new(&config, &space(), 2, 2, &mut rng).unwrap();
         assert_eq!(actor.images().views.len(), 2);
         let (states, _, _) = batch(&mut rng, 256);
-        actor.fit_state_scale(&states);
+        actor.fit_state_scale(&states, 1e-3);
         assert!(
             (actor.state_scale().1[1] - 1e-3).abs() < 1e-9,
             "a constant value"
@@ -582,7 +582,7 @@ mod tests {
         // Noise, not the flat background of `batch`: on a flat image every patch has the same
         // pre-activation, and a finite difference would step across ReLU's kink for all of them.
         let images: Vec<u8> = (0..3 * space().len()).map(|_| rng.random()).collect();
-        actor.fit_state_scale(&states);
+        actor.fit_state_scale(&states, 1e-3);
         let tensors = actor.tensors();
         let mut params: Vec<Vec<f32>> = (tensors.iter())
             .map(|t| t.flatten_all().unwrap().to_vec1::<f32>().unwrap())
@@ -660,7 +660,7 @@ mod tests {
         };
         let mut actor = PixelActor::new(&config, &space(), 2, 3, &mut rng).unwrap();
         let (states, images, _) = batch(&mut rng, 5);
-        actor.fit_state_scale(&states);
+        actor.fit_state_scale(&states, 1e-3);
         let weights = actor.weights();
         let loaded = PixelActor::from_weights(&config, &space(), 2, 3, &weights).unwrap();
         let mut cache = PixelCache::default();

@@ -268,6 +268,12 @@ fn surrogate(
     )
 }
 
+/// The least standard deviation the actor's state standardisation divides by (the state's own
+/// units: radians, metres, the gripper's opening): a value the first rollout hardly moved
+/// (the gripper, before any grasp) would otherwise be scaled by up to 1,000 when it does move,
+/// and the update blow up (an approximate KL of 24 at 16k steps with a floor of 1e-3).
+const STATE_STD_FLOOR: f32 = 0.05;
+
 /// Recomputes the stored actions' log-probabilities under `actor` and `log_std`.
 fn relabel_log_probs(
     actor: &PixelActor,
@@ -405,7 +411,7 @@ pub fn train_pixel_ppo<V: VectorEnv>(
             // The first rollout's states fix the actor's standardisation of its state input
             // (the states at reset alone hardly vary); its actions' log-probabilities are
             // recomputed under it, so the first update starts from the policy it changes.
-            actor.fit_state_scale(&buffer.observations);
+            actor.fit_state_scale(&buffer.observations, STATE_STD_FLOOR);
             relabel_log_probs(&actor, &mut buffer, &log_std, &mut cache)?;
         }
         timesteps += (ppo.n_steps * n) as u64;
