@@ -192,10 +192,12 @@ fn train_pixel(
     let mut on_iteration = |it: &PixelIteration| {
         if !quiet {
             println!(
-                "{:>9} steps: {}/{} rollout episodes succeeded, std {:.3}, value loss {:.4}, KL {:.4} (env {:.1} s, act {:.1} s, update {:.1} s)",
+                "{:>9} steps: {}/{} rollout episodes succeeded, {:.0} % grasped, return {:.2}, std {:.3}, value loss {:.4}, KL {:.4} (env {:.1} s, act {:.1} s, update {:.1} s)",
                 it.timesteps,
                 it.successes,
                 it.episodes,
+                100.0 * it.grasped,
+                it.mean_return,
                 it.std,
                 it.value_loss,
                 it.approx_kl,

@@ -56,6 +56,11 @@ pub struct PixelIteration {
     pub episodes: u32,
     /// See [`Self::episodes`].
     pub successes: u32,
+    /// Mean return of those episodes (the environment's own reward units) and the share that
+    /// ever grasped the object (the task's `grasped` extra; 0 where it has none).
+    pub mean_return: f32,
+    /// See [`Self::mean_return`].
+    pub grasped: f32,
     /// Mean clipped surrogate loss, value loss and approximate KL of the last epoch.
     pub policy_loss: f32,
     /// See [`Self::policy_loss`].
@@ -393,9 +398,11 @@ pub fn train_pixel_ppo<V: VectorEnv>(
             );
             for i in 0..n {
                 starts[i] = step.terminated[i] || step.truncated[i];
-                if let Some(_end) = &step.episode_ends[i] {
+                if let Some(end) = &step.episode_ends[i] {
                     it.episodes += 1;
                     it.successes += u32::from(step.infos[i].success);
+                    it.mean_return += end.episode.episode_return as f32;
+                    it.grasped += end.episode.max_extras.get("grasped").unwrap_or(0.0);
                     if step.truncated[i] && !step.terminated[i] {
                         // Bootstrap the cut episode from its last state's value.
                         let mut x = Vec::new();
@@ -413,6 +420,10 @@ pub fn train_pixel_ppo<V: VectorEnv>(
             // recomputed under it, so the first update starts from the policy it changes.
             actor.fit_state_scale(&buffer.observations, STATE_STD_FLOOR);
             relabel_log_probs(&actor, &mut buffer, &log_std, &mut cache)?;
+        }
+        if it.episodes > 0 {
+            it.mean_return /= it.episodes as f32;
+            it.grasped /= it.episodes as f32;
         }
         timesteps += (ppo.n_steps * n) as u64;
         let last_values = critic.values(&privileged.rows, n)?;
