@@ -396,8 +396,8 @@ pub fn train_pixel_ppo<V: VectorEnv>(
                 &log_probs,
                 &rows,
             );
-            for i in 0..n {
-                starts[i] = step.terminated[i] || step.truncated[i];
+            for (i, start) in starts.iter_mut().enumerate() {
+                *start = step.terminated[i] || step.truncated[i];
                 if let Some(end) = &step.episode_ends[i] {
                     it.episodes += 1;
                     it.successes += u32::from(step.infos[i].success);
