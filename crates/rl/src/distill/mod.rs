@@ -413,11 +413,13 @@ pub fn evaluate_student<E: Env>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use fairgrasp_env::{GraspConfig, GraspEnv, ObsMode};
 
-    fn envs(mode: ObsMode) -> VecEnv<GraspEnv> {
+    /// Two grasp envs with 24×24 camera images in `mode`, on one thread (the camera learners'
+    /// tests share them).
+    pub(crate) fn envs(mode: ObsMode) -> VecEnv<GraspEnv> {
         let make = || {
             let mut config = GraspConfig::default();
             config.camera.mode = mode;

@@ -495,17 +495,8 @@ pub fn train_pixel_ppo<V: VectorEnv>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fairgrasp_env::{GraspConfig, GraspEnv, ObsMode, VecEnv};
-
-    fn envs(mode: ObsMode) -> VecEnv<GraspEnv> {
-        let make = || {
-            let mut config = GraspConfig::default();
-            config.camera.mode = mode;
-            (config.camera.width, config.camera.height) = (24, 24);
-            GraspEnv::new(config).unwrap()
-        };
-        VecEnv::new(vec![make(), make()], 1).unwrap()
-    }
+    use crate::distill::tests::envs;
+    use fairgrasp_env::ObsMode;
 
     fn small() -> (PpoConfig, PixelPpoConfig) {
         let ppo = PpoConfig {
