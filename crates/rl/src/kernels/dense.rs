@@ -2,10 +2,7 @@
 //! layers of the pixel policies' networks ([`crate::policies::pixel_actor`]), whose convolutions
 //! ([`crate::kernels::conv`]) are linear layers over image patches.
 
-use crate::kernels::mlp::{matmul, matmul_add};
-
-/// Rows per block of a weight gradient's sum ([`linear_backward`]).
-const GRADIENT_ROWS: usize = 256;
+use crate::kernels::mlp::matmul;
 
 /// `out (rows × out_dim) = x (rows × in_dim) · weightᵀ + bias`, `weight` `out_dim × in_dim`.
 pub fn linear_forward(
@@ -44,21 +41,14 @@ pub fn linear_backward(
     d_x: Option<&mut [f32]>,
 ) {
     let rows = x.len() / in_dim;
-    d_weight[..out_dim * in_dim].fill(0.0);
-    // Summed over blocks of rows, each packed by gemm while still in cache: on the NatureCNN's
-    // weight gradients (25,600 and 5,184 rows, Intel Xeon, one thread, three runs) its AVX2
-    // kernel took 0–33 % less time (median 24 %), its AVX-512 kernel within ±5 %.
-    for start in (0..rows).step_by(GRADIENT_ROWS) {
-        let block = GRADIENT_ROWS.min(rows - start);
-        matmul_add(
-            (out_dim, in_dim, block),
-            d_weight,
-            &d_out[start * out_dim..],
-            (1, out_dim),
-            &x[start * in_dim..],
-            (in_dim, 1),
-        );
-    }
+    matmul(
+        (out_dim, in_dim, rows),
+        d_weight,
+        d_out,
+        (1, out_dim),
+        x,
+        (in_dim, 1),
+    );
     d_bias[..out_dim].fill(0.0);
     for row in d_out[..rows * out_dim].chunks_exact(out_dim) {
         for (d, g) in d_bias.iter_mut().zip(row) {
@@ -134,28 +124,5 @@ mod tests {
         let mut grad = [5.0f32, 5.0];
         relu_backward(&v, &mut grad);
         assert_eq!((v, grad), ([0.0, 2.0], [0.0, 5.0]));
-    }
-
-    #[test]
-    fn weight_gradients_sum_every_block_of_rows() {
-        // 600 rows: two whole blocks and a part; every row's outer product counts once.
-        let (rows, in_dim, out_dim) = (600, 5, 3);
-        let x: Vec<f32> = (0..rows * in_dim).map(|i| (i % 7) as f32 * 0.1).collect();
-        let g: Vec<f32> = (0..rows * out_dim).map(|i| (i % 5) as f32 - 2.0).collect();
-        let w = vec![0.0; out_dim * in_dim];
-        let (mut dw, mut db) = (vec![f32::NAN; out_dim * in_dim], vec![0.0; out_dim]);
-        linear_backward((in_dim, out_dim), &x, &w, &g, &mut dw, &mut db, None);
-        for o in 0..out_dim {
-            for i in 0..in_dim {
-                let want: f64 = (0..rows)
-                    .map(|r| g[r * out_dim + o] as f64 * x[r * in_dim + i] as f64)
-                    .sum();
-                let got = dw[o * in_dim + i] as f64;
-                assert!(
-                    (got - want).abs() < 1e-3 * want.abs().max(1.0),
-                    "{got} vs {want}"
-                );
-            }
-        }
     }
 }

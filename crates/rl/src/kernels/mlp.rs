@@ -32,37 +32,14 @@ fn gemm_threads() -> usize {
 
 /// `dst (m × n, row-major) = lhs (m × k) · rhs (k × n)`, the operands given by their row and
 /// column strides: candle's CPU `matmul` call of `gemm`, so that the sums run in its order.
+#[allow(clippy::too_many_arguments)]
 pub fn matmul(
-    dims: (usize, usize, usize),
-    dst: &mut [f32],
-    lhs: &[f32],
-    lhs_strides: (usize, usize),
-    rhs: &[f32],
-    rhs_strides: (usize, usize),
-) {
-    product(dims, dst, lhs, lhs_strides, rhs, rhs_strides, false);
-}
-
-/// [`matmul`] that adds the product to `dst` instead of overwriting it.
-pub fn matmul_add(
-    dims: (usize, usize, usize),
-    dst: &mut [f32],
-    lhs: &[f32],
-    lhs_strides: (usize, usize),
-    rhs: &[f32],
-    rhs_strides: (usize, usize),
-) {
-    product(dims, dst, lhs, lhs_strides, rhs, rhs_strides, true);
-}
-
-fn product(
     (m, n, k): (usize, usize, usize),
     dst: &mut [f32],
     lhs: &[f32],
     (lhs_rs, lhs_cs): (usize, usize),
     rhs: &[f32],
     (rhs_rs, rhs_cs): (usize, usize),
-    accumulate: bool,
 ) {
     assert!(dst.len() >= m * n, "matmul destination too short");
     let reach = |rs: usize, cs: usize, rows: usize, cols: usize| {
@@ -95,14 +72,14 @@ fn product(
             dst.as_mut_ptr(),
             1,
             n as isize,
-            accumulate,
+            false,
             lhs.as_ptr(),
             lhs_cs as isize,
             lhs_rs as isize,
             rhs.as_ptr(),
             rhs_cs as isize,
             rhs_rs as isize,
-            if accumulate { 1.0 } else { 0.0 },
+            0.0,
             1.0,
             false,
             false,
