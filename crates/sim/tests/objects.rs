@@ -419,6 +419,30 @@ fn random_resets_place_five_objects_apart_on_the_table() {
     let a = scene.reset(7).unwrap();
     let b = scene.reset(7).unwrap();
     assert_eq!(a, b);
+    // A clearance keeps every pair that far apart (up to the settling after the drop).
+    let mut config = scene.config().clone();
+    config.placement.clearance = 0.03;
+    let mut spaced = Scene::new(config).unwrap();
+    let mut closest = f32::INFINITY;
+    for seed in 0..20 {
+        let poses = spaced.reset(seed).unwrap();
+        for i in 0..5 {
+            for j in i + 1..5 {
+                let (a, la) = &colliders[i];
+                let (b, lb) = &colliders[j];
+                let d = query::distance(
+                    &(to_pose(&poses[i]) * la),
+                    a.as_ref(),
+                    &(to_pose(&poses[j]) * lb),
+                    b.as_ref(),
+                )
+                .unwrap()
+                .distance;
+                closest = closest.min(d);
+            }
+        }
+    }
+    assert!((0.028..0.06).contains(&closest), "closest pair {closest} m");
 }
 
 #[test]
@@ -571,6 +595,12 @@ fn bad_object_and_bin_settings_name_their_key() {
         ("objects[0].friction", "positive", |c| {
             c.objects[0].friction = -1.0
         }),
+        ("objects[0].angular_damping", "non-negative", |c| {
+            c.objects[0].angular_damping = f32::NAN
+        }),
+        ("placement.clearance", "[0, 0.2]", |c| {
+            c.placement.clearance = -0.01
+        }),
         ("objects[0].color", "0..=1", |c| {
             c.objects[0].color = [2.0, 0.0, 0.0]
         }),
@@ -708,6 +738,7 @@ fn objects_and_bins_read_from_toml() {
             mass: 0.2,
             friction: 0.5,
             color: [0.1, 0.2, 0.9],
+            angular_damping: 0.0,
         }
     );
     assert_eq!(config.objects[3].shape, hex_prism());

@@ -118,6 +118,11 @@ pub struct ObjectConfig {
     /// Linear RGB in 0..1, for renderers.
     #[serde(default = "default_object_color")]
     pub color: [f32; 3],
+    /// Damping of the object's spin (1/s, not negative): stands in for rolling resistance,
+    /// which the contact model lacks, so that a cylinder on its side comes to rest instead of
+    /// rolling wall to wall in a bin.
+    #[serde(default)]
+    pub angular_damping: f32,
 }
 
 fn default_object_mass() -> f32 {
@@ -143,6 +148,7 @@ impl Default for ObjectConfig {
             mass: default_object_mass(),
             friction: default_object_friction(),
             color: default_object_color(),
+            angular_damping: 0.0,
         }
     }
 }
@@ -189,6 +195,9 @@ pub struct PlacementConfig {
     pub size: [f32; 2],
     /// Yaw drawn from [-yaw_range, yaw_range] (rad).
     pub yaw_range: f32,
+    /// Least gap between an object and the other objects and the bins (m): room for the open
+    /// fingers beside a neighbour when several objects share the table.
+    pub clearance: f32,
 }
 
 impl Default for PlacementConfig {
@@ -197,6 +206,7 @@ impl Default for PlacementConfig {
             center: [0.5, 0.0],
             size: [0.4, 0.4],
             yaw_range: std::f32::consts::PI,
+            clearance: 0.002,
         }
     }
 }
@@ -524,6 +534,13 @@ impl SceneConfig {
                 "must be non-negative",
             ));
         }
+        let clearance = self.placement.clearance;
+        if !(clearance.is_finite() && (0.0..=0.2).contains(&clearance)) {
+            return Err(SimError::config(
+                "placement.clearance",
+                "must be in [0, 0.2] m",
+            ));
+        }
         positive("gripper.force_limit", self.gripper.force_limit)?;
         positive("gripper.pad_friction", self.gripper.pad_friction)?;
         positive("gripper.kp", self.gripper.kp)?;
@@ -594,6 +611,12 @@ impl SceneConfig {
             })?;
             positive(&format!("{key}.mass"), o.mass)?;
             positive(&format!("{key}.friction"), o.friction)?;
+            if !(o.angular_damping.is_finite() && o.angular_damping >= 0.0) {
+                return Err(SimError::config(
+                    format!("{key}.angular_damping"),
+                    "must be non-negative",
+                ));
+            }
             unit_color(&format!("{key}.color"), &o.color)?;
         }
         Ok(())

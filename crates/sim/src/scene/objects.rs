@@ -15,9 +15,6 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// Gap kept between objects, and between objects and bins, when placing (m).
-const PLACEMENT_CLEARANCE: f32 = 0.002;
-
 /// Largest gap at which two shapes count as touching (m).
 const TOUCH_DISTANCE: f32 = 0.001;
 
@@ -184,6 +181,7 @@ pub(super) fn insert_object(
         RigidBodyBuilder::dynamic()
             .can_sleep(false)
             .enabled(false)
+            .angular_damping(object.angular_damping)
             .build(),
     );
     let collider = world.colliders.insert_with_parent(
@@ -674,7 +672,7 @@ impl Scene {
         let too_close = |c: ColliderHandle| {
             let other = &self.world.colliders[c];
             query::distance(&at, shape, &collider_pose(&self.world, c), other.shape())
-                .map(|d| d.distance < PLACEMENT_CLEARANCE)
+                .map(|d| d.distance < self.config.placement.clearance)
                 .unwrap_or(true)
         };
         let robot_hit = self.robot.bodies.iter().any(|&b| {
@@ -793,9 +791,10 @@ impl Scene {
                     "placement",
                     format!(
                         "no reachable, collision-free placement for object '{}' found in \
-                         {PLACEMENT_DRAWS} draws; check the area, the bins and the number of \
-                         objects",
-                        self.object_name(i)
+                         {PLACEMENT_DRAWS} draws; check the area, the bins, the number of \
+                         objects and the clearance ({} m)",
+                        self.object_name(i),
+                        p.clearance
                     ),
                 )
             })?;
