@@ -104,6 +104,61 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
 }
 
 #[test]
+fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
+    let mode = ActionMode::Cartesian;
+    let mut config = SortConfig::default();
+    config.control.action_mode = mode;
+    let mut env = SortEnv::new(config).unwrap();
+    let leading = pick_place(mode).observation_space().low.len();
+    let n = 3;
+    // Then the active object's half extents and yaw (5), every object (5 each), the share left.
+    assert_eq!(env.observation_space().low.len(), leading + 5 + 5 * n + 1);
+    let (obs, _) = env.reset(Some(4)).unwrap();
+    // Pick and place's goal and object→goal sit at its end: here the drop point of object 0.
+    let goal_at = leading - 6;
+    let check = |obs: &[f32], env: &SortEnv, active: usize| {
+        let s = env.state().unwrap();
+        let object = s.objects[active].pose.translation.vector;
+        let drop = env.task().drop_point(active);
+        let near =
+            |a: &[f32], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (*x as f64 - y).abs() < 1e-5);
+        assert!(
+            near(&obs[21..24], [object.x, object.y, object.z]),
+            "object {active}"
+        );
+        assert!(near(&obs[goal_at..goal_at + 3], [drop.x, drop.y, drop.z]));
+        let to_drop = drop - object;
+        assert!(near(
+            &obs[goal_at + 3..leading],
+            [to_drop.x, to_drop.y, to_drop.z]
+        ));
+        let flags = |i: usize| &obs[leading + 5 + 5 * i + 3..leading + 5 + 5 * i + 5];
+        for i in 0..n {
+            assert_eq!(
+                flags(i)[1],
+                (i == active) as u8 as f32,
+                "active flag of {i}"
+            );
+        }
+        obs[obs.len() - 1]
+    };
+    assert_eq!(check(&obs, &env, 0), 1.0);
+    // Sort object 0: the block moves on to object 1, and a third of the objects is done.
+    let base = env.scene().base_pose();
+    let drop = base * Point3::from(env.task().drop_point(0));
+    let mut policy = ScriptedGraspPolicy::for_object(&env, 0, Some(drop.coords), true);
+    let mut obs = obs;
+    let mut steps = 0;
+    while (!policy.done() || obs[obs.len() - 1] == 1.0) && steps < 150 {
+        obs = env.step(&policy.act(&env)).unwrap().obs;
+        steps += 1;
+    }
+    assert_eq!(env.task().assignment().len(), n);
+    let left = check(&obs, &env, 1);
+    assert!((left - 2.0 / 3.0).abs() < 1e-6, "{left}");
+}
+
+#[test]
 fn an_object_dropped_into_the_wrong_bin_is_not_sorted() {
     let mut config = SortConfig::default();
     config.control.action_mode = ActionMode::Cartesian;

@@ -323,23 +323,29 @@ impl Task for Sort {
     fn observe(&self, s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
         use NoiseGroup::*;
         let active = self.active().unwrap_or(0);
+        let object = &s.objects[active];
+        // Pick and place's layout, its goal being the active object's drop point.
+        let drop = self.drop_point(active);
         rich_observation(s, active, previous_action, out);
-        out.push3(
-            ObjectPosition,
-            &(self.drop_point(active) - s.objects[active].pose.translation.vector),
+        out.push3(None, &drop);
+        out.push3(ObjectPosition, &(drop - object.pose.translation.vector));
+        // What sorting needs beyond it: the active object's size and how its sides lie, ...
+        out.push(None, &object.half_extents);
+        let yaw = s.relative_yaw(active);
+        out.push(
+            ObjectOrientation,
+            &[(2.0 * yaw).sin() as f32, (2.0 * yaw).cos() as f32],
         );
-        for (i, object) in s.objects.iter().enumerate() {
-            out.push3(ObjectPosition, &object.pose.translation.vector);
-            let colour: Vec<f32> = (0..self.bins.len())
-                .map(|j| (self.assignment[i] == j) as u8 as f32)
-                .collect();
-            out.push(None, &colour);
+        // ... every object from the TCP (the ones in the way), sorted or not, which is active ...
+        let tcp = s.tcp.translation.vector;
+        for (i, o) in s.objects.iter().enumerate() {
+            out.push3(ObjectPosition, &(o.pose.translation.vector - tcp));
             out.push1(None, self.sorted[i] as u8 as f32);
             out.push1(None, (i == active) as u8 as f32);
         }
-        for bin in &self.bins {
-            out.push(None, &[bin.x as f32, bin.y as f32]);
-        }
+        // ... and the share of objects still to sort.
+        let left = self.sorted.iter().filter(|s| !**s).count();
+        out.push1(None, left as f32 / self.sorted.len() as f32);
     }
 
     fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation<SortFlags> {
