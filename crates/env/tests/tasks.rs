@@ -68,6 +68,9 @@ fn the_goal_is_observed_and_lies_in_the_area_up_to_its_height() {
     assert!(heights.iter().any(|h| *h > 0.1) && heights.iter().any(|h| *h < 0.05));
 }
 
+/// The largest step-to-step drop of sorting's progress term along a scripted sort.
+const DROP: f32 = 0.02;
+
 #[test]
 fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
     let mut config = SortConfig::default();
@@ -80,6 +83,7 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
         let n = env.scene().num_objects();
         let mut sorted_seen = 0.0;
         let mut bonuses = 0.0;
+        let mut progress = f32::NEG_INFINITY;
         'episode: for i in 0..n {
             let base = env.scene().base_pose();
             let drop = base * Point3::from(env.task().drop_point(i));
@@ -91,6 +95,20 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
                 assert!(sorted <= (i + 1) as f32, "{sorted} after object {i}");
                 sorted_seen = f32::max(sorted_seen, sorted);
                 bonuses += step.info.reward_terms.get("object_sorted").unwrap();
+                // The dense term follows the script's progress: it never drops by more than
+                // the sway of a carried object.
+                let now = step.info.reward_terms.get("progress").unwrap();
+                assert!(
+                    now >= progress - DROP,
+                    "seed {seed}, object {i}: {progress} → {now}"
+                );
+                progress = now;
+                if step.info.success {
+                    assert_eq!(
+                        now, 0.0,
+                        "seed {seed}: every object sorted is the whole progress"
+                    );
+                }
                 if step.terminated || step.truncated {
                     successes += step.info.success as u32;
                     break 'episode;

@@ -1,10 +1,11 @@
 //! `FaArmSort-v0`: put each object into the bin of its colour.
 //!
 //! `num_objects` objects of different kinds (1–5, 3 by default) lie on the table beside
-//! `num_bins` bins (2–3) with real walls. Each episode gives every object a bin, shown in the
-//! observation as the one-hot colour of that bin. The objects are sorted in order: the
-//! *active* object is the first one not yet resting in its bin, and the observation and the
-//! staged reward centre on it. Success: every object rests in its bin.
+//! `num_bins` bins (2–3) with real walls. Each episode gives every object a bin (the bin's
+//! colour in the scene). The objects are sorted in order: the *active* object is the first one
+//! not yet placed in its bin, and the observation (pick and place's, with the active object's
+//! drop point as its goal) and the staged reward centre on it. Success: every object rests in
+//! its bin.
 
 use crate::arm::observation::rich_observation;
 use crate::arm::{
@@ -36,6 +37,10 @@ const SLOTS: [[f64; 2]; 5] = [
 /// over, or dropped on its side into a bin, comes to rest instead of rolling off the table or
 /// wall to wall in the bin (at 1/s it still rolled at 7–9 cm/s when the episode ended).
 const SPIN_DAMPING: f32 = 5.0;
+
+/// How far inside its bin's walls a released object's centre must be to count as dropped into
+/// it (m): less than the smallest object's half width, so one lying against a wall counts.
+const WALL_MARGIN: f64 = 0.015;
 
 /// Bin colours, in bin order: red, blue, green (linear RGB).
 const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
@@ -205,18 +210,23 @@ pub struct Sort {
     bins: Vec<Vector3<f64>>,
     /// Height above a bin's floor from which objects are dropped in (m).
     drop_height: f64,
+    /// Lift above its resting height at which an object clears the bin walls (m).
+    clear_lift: f64,
     /// Distance of a slot's centre from the bin's centre along x and y (m).
     slot_spacing: f64,
     /// Objects already paid for.
     paid: Vec<bool>,
+    /// Objects in their bin and let go at the last evaluation, moving or not: the task moves
+    /// on to the next object (an object settling in its bin flickers in and out of `sorted`).
+    placed: Vec<bool>,
     /// Objects resting in their bin at the last evaluation.
     sorted: Vec<bool>,
 }
 
 impl Sort {
-    /// The first object not resting in its bin.
+    /// The first object not placed in its bin.
     fn active(&self) -> Option<usize> {
-        self.sorted.iter().position(|s| !s)
+        self.placed.iter().position(|p| !p)
     }
 
     /// Where object `i` should be dropped from (arm base frame): above its own slot of its
@@ -228,12 +238,34 @@ impl Sort {
         self.bins[bin] + Vector3::new(dx, dy, self.drop_height)
     }
 
-    /// Whether object `i`'s centre lies over the inside of its own bin (any height).
+    /// Whether object `i`'s centre lies over the inside of its own bin (any height), at least
+    /// [`WALL_MARGIN`] from the walls: an object balanced on a wall top has its centre over the
+    /// wall, one lying against it inside.
     fn over_own_bin(&self, i: usize, s: &ArmState) -> bool {
         let bin = self.bins[self.assignment[i]];
         let at = s.objects[i].pose.translation.vector;
-        let [hx, hy] = self.settings.bin_inner_size.map(|v| v as f64 / 2.0);
-        (at.x - bin.x).abs() <= hx && (at.y - bin.y).abs() <= hy
+        let [ix, iy] = self
+            .settings
+            .bin_inner_size
+            .map(|v| v as f64 / 2.0 - WALL_MARGIN);
+        (at.x - bin.x).abs() <= ix && (at.y - bin.y).abs() <= iy
+    }
+
+    /// The active object's stage in [0, 1]: reach (up to 1/4), grasp (1/4), lift over the
+    /// walls (1/4) and carry to the drop point (1/4, earned only as high as the lift: no
+    /// dragging through a wall); 1 once released over its bin clear of the walls.
+    fn stage(&self, i: usize, s: &ArmState) -> f32 {
+        if !s.grasped(i) {
+            if self.over_own_bin(i, s) {
+                return 1.0;
+            }
+            let reach = 1.0 - (4.0 * s.tcp_to_object(i).norm() as f32).tanh();
+            return reach / 4.0;
+        }
+        let lift = (s.lift(i) / self.clear_lift).clamp(0.0, 1.0) as f32;
+        let to_drop = (self.drop_point(i) - s.objects[i].pose.translation.vector).norm();
+        let carry = 1.0 - (4.0 * to_drop as f32).tanh();
+        (1.0 + lift + lift * carry) / 4.0
     }
 
     /// Each object's bin this episode.
@@ -311,9 +343,11 @@ impl Task for Sort {
             assignment: vec![0; n],
             bins,
             drop_height: wall + 0.06,
+            clear_lift: wall + 0.02,
             slot_spacing: (config.task.bin_inner_size[0].min(config.task.bin_inner_size[1]) / 4.0)
                 as f64,
             paid: vec![false; n],
+            placed: vec![false; n],
             sorted: vec![false; n],
         })
     }
@@ -324,6 +358,7 @@ impl Task for Sort {
             *a = rng.random_range(0..self.settings.num_bins);
         }
         self.paid.fill(false);
+        self.placed.fill(false);
         self.sorted.fill(false);
         Ok(())
     }
@@ -344,22 +379,23 @@ impl Task for Sort {
             ObjectOrientation,
             &[(2.0 * yaw).sin() as f32, (2.0 * yaw).cos() as f32],
         );
-        // ... every object from the TCP (the ones in the way), sorted or not, which is active ...
+        // ... every object from the TCP (the ones in the way), placed or not, which is active ...
         let tcp = s.tcp.translation.vector;
         for (i, o) in s.objects.iter().enumerate() {
             out.push3(ObjectPosition, &(o.pose.translation.vector - tcp));
-            out.push1(None, self.sorted[i] as u8 as f32);
+            out.push1(None, self.placed[i] as u8 as f32);
             out.push1(None, (i == active) as u8 as f32);
         }
-        // ... and the share of objects still to sort.
-        let left = self.sorted.iter().filter(|s| !**s).count();
-        out.push1(None, left as f32 / self.sorted.len() as f32);
+        // ... and the share of objects still to place.
+        let left = self.placed.iter().filter(|p| !**p).count();
+        out.push1(None, left as f32 / self.placed.len() as f32);
     }
 
     fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation<SortFlags> {
         for i in 0..self.sorted.len() {
             let resting = s.objects[i].linvel.norm() < self.settings.max_object_speed as f64;
-            self.sorted[i] = scene.object_in_bin(i, self.assignment[i]) && resting && !s.grasped(i);
+            self.placed[i] = scene.object_in_bin(i, self.assignment[i]) && !s.grasped(i);
+            self.sorted[i] = self.placed[i] && resting;
         }
         let count = self.sorted.iter().filter(|s| **s).count();
         let off = (0..self.sorted.len()).any(|i| scene.object_off_table(i));
@@ -385,31 +421,13 @@ impl Task for Sort {
                 newly += 1;
             }
         }
-        // Stage of the active object in [0, 1]: reach, grasp, carry to its drop point, and
-        // full once it is over its bin, held or falling, so that letting go there never
-        // lowers the reward (it only adds the sort bonus once the object rests). With the stage
-        // divided by n and dropped on release, the policy grasped 97 % of the time and never
-        // sorted one object in 55 minutes.
-        let stage = match self.active() {
-            None => 1.0,
-            Some(i) if self.over_own_bin(i, s) => 1.0,
-            Some(i) => {
-                let grasped = s.grasped(i);
-                let reach = 1.0 - (4.0 * s.tcp_to_object(i).norm() as f32).tanh();
-                let to_drop = (self.drop_point(i) - s.objects[i].pose.translation.vector).norm();
-                let carry = 1.0 - (4.0 * to_drop as f32).tanh();
-                if grasped {
-                    (2.0 + carry) / 3.0
-                } else {
-                    reach / 3.0
-                }
-            }
-        };
-        let count = e.flags.objects_sorted as f32;
+        // Every object placed: their count is the whole progress.
+        let stage = self.active().map_or(0.0, |i| self.stage(i, s));
+        let placed = self.placed.iter().filter(|p| **p).count() as f32;
         let mut terms = NamedValues::new();
-        // In [-n, 0] per step: each object sorted is worth a whole stage, so carrying the
+        // In [-n, 0] per step: each object placed is worth a whole stage, so carrying the
         // active object pays as much as the pick-and-place task's carry does.
-        terms.set("progress", count + stage - n);
+        terms.set("progress", placed + stage - n);
         terms.set("object_sorted", newly as f32 * self.reward.object_sorted);
         let off = e.failure.is_some();
         terms.set("off_table", if off { -(steps_left as f32) } else { 0.0 });
@@ -419,8 +437,9 @@ impl Task for Sort {
 
     fn describe(&self, _s: &ArmState) -> String {
         format!(
-            "bins {:?}, sorted {:?}, active {:?}",
+            "bins {:?}, placed {:?}, sorted {:?}, active {:?}",
             self.assignment,
+            self.placed,
             self.sorted,
             self.active()
         )
