@@ -170,6 +170,17 @@ pub(crate) fn rich_observation(
     out.push(None, previous_action);
 }
 
+/// Object `i`'s shape block (5 values, after the `rich` layout where shapes vary): its half
+/// extents and sin/cos of 2 × its yaw relative to the TCP (a box's twofold symmetry folded out).
+pub(crate) fn shape_observation(s: &ArmState, i: usize, out: &mut ObsWriter) {
+    let yaw = s.relative_yaw(i);
+    out.push(NoiseGroup::None, &s.objects[i].half_extents);
+    out.push(
+        NoiseGroup::ObjectOrientation,
+        &[(2.0 * yaw).sin() as f32, (2.0 * yaw).cos() as f32],
+    );
+}
+
 /// What the real arm reports, for pixel policies (the `[camera]` modes): joints, joint speeds,
 /// TCP position and orientation (two rotation-matrix columns), the gripper opening and the
 /// previous action (22 values plus the action). Nothing about the objects: the camera shows them.

@@ -10,7 +10,7 @@
 //! [`Task::success_judge`]) run that same type, and the scripted pick judges by
 //! [`GraspSettings::success_rule`].
 
-use crate::arm::observation::rich_observation;
+use crate::arm::observation::{rich_observation, shape_observation};
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings,
     SuccessJudge, Task, TaskFlags, TaskSettings,
@@ -391,12 +391,7 @@ impl Task for Grasp {
             ObservationPreset::Rich => {
                 rich_observation(s, 0, previous_action, out);
                 if self.random_shapes {
-                    let yaw = s.relative_yaw(0);
-                    out.push(None, &object.half_extents);
-                    out.push(
-                        ObjectOrientation,
-                        &[(2.0 * yaw).sin() as f32, (2.0 * yaw).cos() as f32],
-                    );
+                    shape_observation(s, 0, out);
                 }
             }
         }

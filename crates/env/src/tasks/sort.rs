@@ -7,7 +7,7 @@
 //! drop point as its goal) and the staged reward centre on it. Success: every object rests in
 //! its bin.
 
-use crate::arm::observation::rich_observation;
+use crate::arm::observation::{rich_observation, shape_observation};
 use crate::arm::{
     ArmEnv, ArmEnvConfig, ArmState, Evaluation, NoiseGroup, ObsWriter, RewardSettings, Task,
     TaskFlags, TaskSettings,
@@ -373,12 +373,7 @@ impl Task for Sort {
         out.push3(None, &drop);
         out.push3(ObjectPosition, &(drop - object.pose.translation.vector));
         // What sorting needs beyond it: the active object's size and how its sides lie, ...
-        out.push(None, &object.half_extents);
-        let yaw = s.relative_yaw(active);
-        out.push(
-            ObjectOrientation,
-            &[(2.0 * yaw).sin() as f32, (2.0 * yaw).cos() as f32],
-        );
+        shape_observation(s, active, out);
         // ... every object from the TCP (the ones in the way), placed or not, which is active ...
         let tcp = s.tcp.translation.vector;
         for (i, o) in s.objects.iter().enumerate() {
