@@ -285,6 +285,7 @@ fn event_name(event: EpisodeEvent) -> &'static str {
         EpisodeEvent::ObjectOffTable => "object_off_table",
         EpisodeEvent::NonFiniteState => "non_finite_state",
         EpisodeEvent::IkFailed => "ik_failed",
+        EpisodeEvent::ObjectMisplaced => "object_misplaced",
         EpisodeEvent::Collision => "collision",
     }
 }

@@ -351,17 +351,18 @@ impl RolloutStats {
     }
 }
 
-/// One scripted episode of an arm task: `(success, steps)`. The plan picks each object in
-/// turn, carrying it to `goal(env, i)` when there is one and releasing it there if `release`.
+/// One scripted episode of an arm task: `(success, steps)`. The plan picks the objects that
+/// `objects(env)` lists after the reset, in turn, carrying each to `goal(env, i)` when there is
+/// one and releasing it there if `release`.
 fn scripted_episode<T: Task>(
     env: &mut ArmEnv<T>,
     seed: u64,
     goal: impl Fn(&ArmEnv<T>, usize) -> Option<Vector3<f64>>,
-    objects: usize,
+    objects: impl Fn(&ArmEnv<T>) -> Vec<usize>,
     release: bool,
 ) -> Result<(bool, u32)> {
     env.reset(Some(seed))?;
-    for i in 0..objects {
+    for i in objects(env) {
         let mut policy = ScriptedGraspPolicy::for_object(env, i, goal(env, i), release);
         while !policy.done() {
             let step = env.step(&policy.act(env))?;
@@ -395,24 +396,29 @@ fn scripted(args: &ScriptedArgs) -> Result<()> {
     let mut run: Box<dyn FnMut(u64) -> Result<(bool, u32)>> = match args.env.id.as_str() {
         "FaArmGrasp-v0" => {
             let mut env = GraspEnv::new(from_table(table)?)?;
-            Box::new(move |seed| scripted_episode(&mut env, seed, |_, _| None, 1, false))
+            Box::new(move |seed| scripted_episode(&mut env, seed, |_, _| None, |_| vec![0], false))
         }
         "FaArmPickPlace-v0" => {
             let mut env = PickPlaceEnv::new(from_table(table)?)?;
             Box::new(move |seed| {
                 let goal =
                     |e: &PickPlaceEnv, _| Some(world_goal(e.scene().base_pose(), e.task().goal()));
-                scripted_episode(&mut env, seed, goal, 1, false)
+                scripted_episode(&mut env, seed, goal, |_| vec![0], false)
             })
         }
         "FaArmSort-v0" => {
             let mut env = SortEnv::new(from_table(table)?)?;
-            let n = env.scene().num_objects();
             Box::new(move |seed| {
                 let goal = |e: &SortEnv, i| {
                     Some(world_goal(e.scene().base_pose(), e.task().drop_point(i)))
                 };
-                scripted_episode(&mut env, seed, goal, n, true)
+                // The task's order, less the objects that start sorted.
+                let objects = |e: &SortEnv| {
+                    let task = e.task();
+                    let to_sort = |i: &usize| !task.started_sorted()[*i];
+                    task.order().iter().copied().filter(to_sort).collect()
+                };
+                scripted_episode(&mut env, seed, goal, objects, true)
             })
         }
         other => anyhow::bail!("no scripted policy for {other}; it has the arm tasks only"),

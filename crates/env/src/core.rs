@@ -62,6 +62,8 @@ pub enum Frame {
 pub enum EpisodeEvent {
     /// The object left the table (terminates, with a penalty).
     ObjectOffTable,
+    /// An object came to rest in a bin not its own (sorting; the task moves on without it).
+    ObjectMisplaced,
     /// The physics produced NaN or infinity; the episode was cut and the last finite
     /// observation returned.
     NonFiniteState,

@@ -85,6 +85,13 @@ fn unknown_ids_and_keys_are_errors_that_name_them() {
         matches!(&err, EnvError::Config { key, .. } if key == "task.object_clearance"),
         "{err}"
     );
+    let err = make("FaArmSort-v0", &table("[task]\nstart_sorted_max = 3"))
+        .err()
+        .unwrap();
+    assert!(
+        matches!(&err, EnvError::Config { key, .. } if key == "task.start_sorted_max"),
+        "{err}"
+    );
 
     let err = make("Pendulum-v1", &table("g = 9.81")).err().unwrap();
     assert!(err.to_string().contains("no settings"), "{err}");

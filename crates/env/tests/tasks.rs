@@ -80,11 +80,11 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
     let mut successes = 0;
     for seed in 0..10 {
         env.reset(Some(seed)).unwrap();
-        let n = env.scene().num_objects();
+        let order = env.task().order().to_vec();
         let mut sorted_seen = 0.0;
         let mut bonuses = 0.0;
         let mut progress = f32::NEG_INFINITY;
-        'episode: for i in 0..n {
+        'episode: for (k, &i) in order.iter().enumerate() {
             let base = env.scene().base_pose();
             let drop = base * Point3::from(env.task().drop_point(i));
             let mut policy = ScriptedGraspPolicy::for_object(&env, i, Some(drop.coords), true);
@@ -92,7 +92,7 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
                 let step = env.step(&policy.act(&env)).unwrap();
                 let sorted = step.info.extras.get("objects_sorted").unwrap();
                 // The count never runs ahead of the objects dropped so far.
-                assert!(sorted <= (i + 1) as f32, "{sorted} after object {i}");
+                assert!(sorted <= (k + 1) as f32, "{sorted} after object {i}");
                 sorted_seen = f32::max(sorted_seen, sorted);
                 bonuses += step.info.reward_terms.get("object_sorted").unwrap();
                 // The dense term follows the script's progress: it never drops by more than
@@ -121,6 +121,100 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
     assert_eq!(successes, 10);
 }
 
+fn sort_env(configure: impl FnOnce(&mut SortConfig)) -> SortEnv {
+    let mut config = SortConfig::default();
+    config.control.action_mode = ActionMode::Cartesian;
+    configure(&mut config);
+    SortEnv::new(config).unwrap()
+}
+
+/// The gripper open, the arm still.
+const WAIT: [f32; 5] = [0.0, 0.0, 0.0, 0.0, 1.0];
+
+#[test]
+fn sorting_draws_an_order_and_starts_with_up_to_its_maximum_sorted() {
+    let mut env = sort_env(|c| {
+        c.task.start_sorted_max = 2;
+        c.task.max_episode_steps = 30;
+    });
+    let mut counts = [0; 3];
+    let mut orders = std::collections::HashSet::new();
+    for seed in 0..24 {
+        env.reset(Some(seed)).unwrap();
+        let task = env.task();
+        let mut order = task.order().to_vec();
+        orders.insert(order.clone());
+        let started: Vec<usize> = (0..3).filter(|&i| task.started_sorted()[i]).collect();
+        let k = started.len();
+        counts[k] += 1;
+        // The first k of the order, each resting in its own bin.
+        order.truncate(k);
+        order.sort();
+        assert_eq!(started, order, "seed {seed}");
+        for &i in &started {
+            assert!(
+                env.scene().object_in_bin(i, task.assignment()[i]),
+                "seed {seed}"
+            );
+        }
+        // The limit is the objects' share left of 30 steps; the policy is credited with none.
+        let mut steps = 0;
+        loop {
+            let step = env.step(&WAIT).unwrap();
+            steps += 1;
+            let extras = &step.info.extras;
+            assert_eq!(extras.get("objects_sorted"), Some(k as f32), "seed {seed}");
+            assert_eq!(extras.get("fraction_sorted_by_policy"), Some(0.0));
+            if step.terminated || step.truncated {
+                assert!(step.truncated);
+                break;
+            }
+        }
+        assert_eq!(steps, 10 * (3 - k), "seed {seed}");
+    }
+    assert!(counts.iter().all(|c| *c > 0), "{counts:?}");
+    assert!(orders.len() >= 4, "{orders:?}");
+    // In index order, nothing sorted, when told so.
+    let mut env = sort_env(|c| c.task.random_order = false);
+    for seed in 0..5 {
+        env.reset(Some(seed)).unwrap();
+        assert_eq!(env.task().order(), &[0, 1, 2]);
+        assert!(env.task().started_sorted().iter().all(|s| !s));
+    }
+}
+
+#[test]
+fn an_object_off_the_table_is_skipped_and_the_last_lost_ends_the_episode() {
+    use fairgrasp_env::EpisodeEvent;
+    use fairgrasp_env::arm::erased::ArmWorld;
+    use fairgrasp_env::sim::rapier3d::na::Isometry3;
+    let mut env = sort_env(|c| c.task.num_objects = 2);
+    // Beside the table, below its top: off the table at the next step.
+    let away = |env: &mut SortEnv, i: usize| {
+        let pose = Isometry3::translation(-2.0, 2.0 * i as f64, 0.3);
+        env.scene_mut().set_object_pose(i, &pose).unwrap();
+    };
+    let (obs, _) = env.reset(Some(3)).unwrap();
+    let order = env.task().order().to_vec();
+    let active_flag = |obs: &[f32], i: usize| obs[obs.len() - 1 - 5 * (2 - i) + 4];
+    assert_eq!(active_flag(&obs, order[0]), 1.0);
+    away(&mut env, order[0]);
+    let step = env.step(&WAIT).unwrap();
+    assert!(!step.terminated && !step.truncated);
+    assert_eq!(step.info.extras.get("objects_lost"), Some(1.0));
+    assert_eq!(step.info.reward_terms.get("lost"), Some(0.0));
+    // The other object is active now.
+    assert_eq!(active_flag(&step.obs, order[0]), 0.0);
+    assert_eq!(active_flag(&step.obs, order[1]), 1.0);
+    away(&mut env, order[1]);
+    let step = env.step(&WAIT).unwrap();
+    assert!(step.terminated && !step.info.success);
+    assert_eq!(step.info.events, vec![EpisodeEvent::ObjectOffTable]);
+    // Both lost for the steps left: what waiting them out would have cost.
+    let left = 300.0 - 2.0;
+    assert_eq!(step.info.reward_terms.get("lost"), Some(-2.0 * left));
+}
+
 #[test]
 fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
     let mode = ActionMode::Cartesian;
@@ -132,7 +226,9 @@ fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
     // Then the active object's half extents and yaw (5), every object (5 each), the share left.
     assert_eq!(env.observation_space().low.len(), leading + 5 + 5 * n + 1);
     let (obs, _) = env.reset(Some(4)).unwrap();
-    // Pick and place's goal and object→goal sit at its end: here the drop point of object 0.
+    let order = env.task().order().to_vec();
+    // Pick and place's goal and object→goal sit at its end: here the drop point of the first
+    // object of the order.
     let goal_at = leading - 6;
     let check = |obs: &[f32], env: &SortEnv, active: usize| {
         let s = env.state().unwrap();
@@ -160,11 +256,11 @@ fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
         }
         obs[obs.len() - 1]
     };
-    assert_eq!(check(&obs, &env, 0), 1.0);
-    // Sort object 0: the block moves on to object 1, and a third of the objects is done.
+    assert_eq!(check(&obs, &env, order[0]), 1.0);
+    // Sort that object: the block moves on to the next, and a third of the objects is done.
     let base = env.scene().base_pose();
-    let drop = base * Point3::from(env.task().drop_point(0));
-    let mut policy = ScriptedGraspPolicy::for_object(&env, 0, Some(drop.coords), true);
+    let drop = base * Point3::from(env.task().drop_point(order[0]));
+    let mut policy = ScriptedGraspPolicy::for_object(&env, order[0], Some(drop.coords), true);
     let mut obs = obs;
     let mut steps = 0;
     while (!policy.done() || obs[obs.len() - 1] == 1.0) && steps < 150 {
@@ -172,7 +268,7 @@ fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
         steps += 1;
     }
     assert_eq!(env.task().assignment().len(), n);
-    let left = check(&obs, &env, 1);
+    let left = check(&obs, &env, order[1]);
     assert!((left - 2.0 / 3.0).abs() < 1e-6, "{left}");
 }
 
@@ -187,15 +283,27 @@ fn an_object_dropped_into_the_wrong_bin_is_not_sorted() {
     let mut drop = env.scene().bin_pose(wrong).translation.vector;
     drop.z += 0.11;
     let mut policy = ScriptedGraspPolicy::for_object(&env, 0, Some(drop), true);
-    while !policy.done() {
-        let step = env.step(&policy.act(&env)).unwrap();
+    let mut step = env.step(&policy.act(&env)).unwrap();
+    while !step.terminated && !step.truncated {
         assert_eq!(step.info.extras.get("objects_sorted").unwrap(), 0.0);
-        assert!(!step.terminated);
+        let action = match policy.done() {
+            true => WAIT.to_vec(),
+            false => policy.act(&env),
+        };
+        step = env.step(&action).unwrap();
     }
     assert!(
         env.scene().object_in_bin(0, wrong),
         "the drop missed the bin"
     );
+    // Resting in the wrong bin, it is lost: the episode ends, paying for the steps left.
+    assert!(step.terminated && !step.info.success);
+    assert_eq!(
+        step.info.events,
+        vec![fairgrasp_env::EpisodeEvent::ObjectMisplaced]
+    );
+    let left = 300 - step.info.elapsed_steps;
+    assert_eq!(step.info.reward_terms.get("lost"), Some(-(left as f32)));
 }
 
 #[test]

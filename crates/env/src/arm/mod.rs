@@ -819,6 +819,9 @@ impl<T: Task> Env for ArmEnv<T> {
             }
             _ => None,
         };
+        // Judged before observing: the observation shows what the task now asks for (sorting's
+        // next object once one is placed).
+        let mut evaluation = self.task.evaluate(&self.scene, &state);
         let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
         let obs = self.observe(view, &normalised, speed_scale);
         if obs.iter().any(|v| !v.is_finite()) {
@@ -826,7 +829,6 @@ impl<T: Task> Env for ArmEnv<T> {
         }
         let privileged = self.privileged(&state, &normalised, speed_scale);
         self.capture()?;
-        let mut evaluation = self.task.evaluate(&self.scene, &state);
         let mut extras = evaluation.flags.named();
         if watch_force {
             extras.set("contact_force", peak_force);
@@ -836,7 +838,9 @@ impl<T: Task> Env for ArmEnv<T> {
             evaluation.success = false;
             evaluation.failure = Some(EpisodeEvent::Collision);
         }
-        let max_steps = self.config.task.max_episode_steps();
+        let max_steps = self
+            .task
+            .episode_steps(self.config.task.max_episode_steps());
         let episode = self.episode.as_mut().expect("checked");
         episode.steps += 1;
         let steps_left = max_steps.saturating_sub(episode.steps);

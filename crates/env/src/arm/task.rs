@@ -96,6 +96,12 @@ pub trait Task: Send + Sized + 'static {
     /// shapes; place the objects, draw goals, settle the scene.
     fn initialize_episode(&mut self, scene: &mut Scene, rng: &mut ChaCha8Rng) -> Result<()>;
 
+    /// Control steps before this episode is truncated, given the configured limit (called after
+    /// [`Self::initialize_episode`]): sorting shortens it for objects that start sorted.
+    fn episode_steps(&self, max_episode_steps: u32) -> u32 {
+        max_episode_steps
+    }
+
     /// Writes the observation. `previous_action` is normalised to [-1, 1].
     fn observe(&self, state: &ArmState, previous_action: &[f32], out: &mut ObsWriter);
 

@@ -2,10 +2,12 @@
 //!
 //! `num_objects` objects of different kinds (1–5, 3 by default) lie on the table beside
 //! `num_bins` bins (2–3) with real walls. Each episode gives every object a bin (the bin's
-//! colour in the scene). The objects are sorted in order: the *active* object is the first one
-//! not yet placed in its bin, and the observation (pick and place's, with the active object's
-//! drop point as its goal) and the staged reward centre on it. Success: every object rests in
-//! its bin.
+//! colour in the scene) and the objects an order (random by default). The *active* object is
+//! the first in that order neither placed in its bin nor lost (off the table, or resting in
+//! another bin: skipped), and the observation (pick and place's, with the active object's drop
+//! point as its goal) and the staged reward centre on it. Success: every object rests in its
+//! bin. For training, episodes can start with some objects already sorted
+//! (`start_sorted_max`), their time limit shortened to the share of objects left.
 
 use crate::arm::observation::{rich_observation, shape_observation};
 use crate::arm::{
@@ -18,6 +20,7 @@ use crate::error::{EnvError, Result};
 use fairgrasp_sim::rapier3d::na::Vector3;
 use fairgrasp_sim::scene::{BinConfig, ObjectConfig, ObjectShape, Scene, SceneConfig};
 use rand::Rng;
+use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -45,25 +48,26 @@ const WALL_MARGIN: f64 = 0.015;
 /// Bin colours, in bin order: red, blue, green (linear RGB).
 const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
 
-/// The objects' shapes, cycled: a cube, a cylinder, a long box, a short cylinder, a flat box.
+/// The objects' shapes, in order: a cube, a long box, a flat box, a cylinder, a short
+/// cylinder.
 fn object_shape(k: usize) -> ObjectShape {
     match k % 5 {
         0 => ObjectShape::Box {
             size: [0.045, 0.045, 0.045],
         },
-        1 => ObjectShape::Cylinder {
+        1 => ObjectShape::Box {
+            size: [0.04, 0.04, 0.06],
+        },
+        2 => ObjectShape::Box {
+            size: [0.05, 0.04, 0.035],
+        },
+        3 => ObjectShape::Cylinder {
             radius: 0.022,
             height: 0.05,
         },
-        2 => ObjectShape::Box {
-            size: [0.04, 0.04, 0.06],
-        },
-        3 => ObjectShape::Cylinder {
+        _ => ObjectShape::Cylinder {
             radius: 0.025,
             height: 0.04,
-        },
-        _ => ObjectShape::Box {
-            size: [0.05, 0.04, 0.035],
         },
     }
 }
@@ -92,6 +96,13 @@ pub struct SortSettings {
     pub bin_inner_size: [f32; 2],
     /// An object counts as resting when slower than this (m/s).
     pub max_object_speed: f32,
+    /// Each episode starts with a uniform draw of 0 to this many objects (at most
+    /// `num_objects` − 1) already resting in their bins, the first in the order: start states
+    /// across the task for training. `max_episode_steps` is for nothing sorted; an episode
+    /// with `k` of `n` sorted gets its `(n − k)/n` share.
+    pub start_sorted_max: usize,
+    /// Sort the objects in a random order each episode (else in index order).
+    pub random_order: bool,
     /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     pub render_mode: Option<RenderMode>,
 }
@@ -109,6 +120,8 @@ impl Default for SortSettings {
             // Room for every object side by side: 3 objects of up to 6 cm.
             bin_inner_size: [0.2, 0.2],
             max_object_speed: 0.05,
+            start_sorted_max: 0,
+            random_order: true,
             render_mode: None,
         }
     }
@@ -165,6 +178,15 @@ impl TaskSettings for SortSettings {
                 "must be in [0, 0.2] m",
             ));
         }
+        if self.start_sorted_max >= self.num_objects {
+            return Err(EnvError::config(
+                "task.start_sorted_max",
+                format!(
+                    "must be below task.num_objects ({}): an episode needs an object to sort",
+                    self.num_objects
+                ),
+            ));
+        }
         check_non_negative("task.max_object_speed", self.max_object_speed)
     }
 }
@@ -214,6 +236,10 @@ pub struct Sort {
     clear_lift: f64,
     /// Distance of a slot's centre from the bin's centre along x and y (m).
     slot_spacing: f64,
+    /// The order the objects are sorted in this episode.
+    order: Vec<usize>,
+    /// Objects that started the episode in their bins.
+    started_sorted: Vec<bool>,
     /// Objects already paid for.
     paid: Vec<bool>,
     /// Objects in their bin and let go at the last evaluation, moving or not: the task moves
@@ -221,21 +247,60 @@ pub struct Sort {
     placed: Vec<bool>,
     /// Objects resting in their bin at the last evaluation.
     sorted: Vec<bool>,
+    /// Objects off the table, or let go in a bin not their own, at the last evaluation: the
+    /// task goes on without them.
+    lost: Vec<bool>,
 }
 
 impl Sort {
-    /// The first object not placed in its bin.
+    /// The first object in the order neither placed in its bin nor lost.
     fn active(&self) -> Option<usize> {
-        self.placed.iter().position(|p| !p)
+        (self.order.iter().copied()).find(|&i| !self.placed[i] && !self.lost[i])
     }
 
-    /// Where object `i` should be dropped from (arm base frame): above its own slot of its
-    /// bin, so objects sharing a bin lie side by side instead of stacking above the walls.
-    pub fn drop_point(&self, i: usize) -> Vector3<f64> {
+    /// The centre of object `i`'s own slot in its bin, on the bin floor (arm base frame):
+    /// objects sharing a bin lie side by side, in their order, instead of stacking.
+    fn slot_point(&self, i: usize) -> Vector3<f64> {
         let bin = self.assignment[i];
-        let slot = self.assignment[..i].iter().filter(|b| **b == bin).count();
+        let rank = self.order.iter().position(|&k| k == i).unwrap_or(i);
+        let slot = (self.order[..rank].iter())
+            .filter(|&&k| self.assignment[k] == bin)
+            .count();
         let [dx, dy] = SLOTS[slot % SLOTS.len()].map(|v| v * self.slot_spacing);
-        self.bins[bin] + Vector3::new(dx, dy, self.drop_height)
+        self.bins[bin] + Vector3::new(dx, dy, 0.0)
+    }
+
+    /// Where object `i` should be dropped from (arm base frame): above its own slot.
+    pub fn drop_point(&self, i: usize) -> Vector3<f64> {
+        self.slot_point(i) + Vector3::new(0.0, 0.0, self.drop_height)
+    }
+
+    /// The order the objects are sorted in this episode.
+    pub fn order(&self) -> &[usize] {
+        &self.order
+    }
+
+    /// Objects that started this episode resting in their bins.
+    pub fn started_sorted(&self) -> &[bool] {
+        &self.started_sorted
+    }
+
+    /// Moves the first `k` objects of the order into their slots, upright as they stood, and
+    /// lets the scene settle.
+    fn start_sorted(&mut self, scene: &mut Scene, k: usize) -> Result<()> {
+        let base = scene.base_pose();
+        for &i in &self.order[..k] {
+            let mut pose = scene.object_state(i).pose;
+            let slot = base * fairgrasp_sim::rapier3d::na::Point3::from(self.slot_point(i));
+            let rest = slot.z + scene.object_half_height(i) + 0.002;
+            pose.translation.vector = Vector3::new(slot.x, slot.y, rest);
+            scene.set_object_pose(i, &pose)?;
+            self.started_sorted[i] = true;
+        }
+        if k > 0 {
+            scene.settle()?;
+        }
+        Ok(())
     }
 
     /// Whether object `i`'s centre lies over the inside of its own bin (any height), at least
@@ -281,18 +346,30 @@ pub struct SortFlags {
     pub objects_sorted: usize,
     /// Objects in the scene.
     pub objects: usize,
+    /// Objects that started the episode sorted.
+    pub started_sorted: usize,
+    /// Objects resting in their own bins that did not start there: the policy's work.
+    pub sorted_by_policy: usize,
+    /// Objects off the table or in a bin not their own.
+    pub objects_lost: usize,
     /// The fingers are closed on the active object.
     pub grasped: bool,
 }
 
 impl TaskFlags for SortFlags {
     fn named(&self) -> NamedValues {
+        let to_sort = (self.objects - self.started_sorted).max(1);
         NamedValues::new()
             .with("objects_sorted", self.objects_sorted as f32)
             .with(
                 "fraction_sorted",
                 self.objects_sorted as f32 / self.objects as f32,
             )
+            .with(
+                "fraction_sorted_by_policy",
+                self.sorted_by_policy as f32 / to_sort as f32,
+            )
+            .with("objects_lost", self.objects_lost as f32)
             .with("grasped", self.grasped as u8 as f32)
     }
 }
@@ -346,9 +423,12 @@ impl Task for Sort {
             clear_lift: wall + 0.02,
             slot_spacing: (config.task.bin_inner_size[0].min(config.task.bin_inner_size[1]) / 4.0)
                 as f64,
+            order: (0..n).collect(),
+            started_sorted: vec![false; n],
             paid: vec![false; n],
             placed: vec![false; n],
             sorted: vec![false; n],
+            lost: vec![false; n],
         })
     }
 
@@ -357,10 +437,25 @@ impl Task for Sort {
         for a in &mut self.assignment {
             *a = rng.random_range(0..self.settings.num_bins);
         }
-        self.paid.fill(false);
-        self.placed.fill(false);
-        self.sorted.fill(false);
+        self.order = (0..self.assignment.len()).collect();
+        if self.settings.random_order {
+            self.order.shuffle(rng);
+        }
+        self.started_sorted.fill(false);
+        let k = rng.random_range(0..=self.settings.start_sorted_max);
+        self.start_sorted(scene, k)?;
+        // Objects that start sorted are paid for and placed already.
+        self.paid.clone_from(&self.started_sorted);
+        self.placed.clone_from(&self.started_sorted);
+        self.sorted.clone_from(&self.started_sorted);
+        self.lost.fill(false);
         Ok(())
+    }
+
+    fn episode_steps(&self, max_episode_steps: u32) -> u32 {
+        let n = self.order.len() as u32;
+        let left = self.started_sorted.iter().filter(|s| !**s).count() as u32;
+        (max_episode_steps * left).div_ceil(n).max(1)
     }
 
     fn observe(&self, s: &ArmState, previous_action: &[f32], out: &mut ObsWriter) {
@@ -387,22 +482,43 @@ impl Task for Sort {
     }
 
     fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation<SortFlags> {
-        for i in 0..self.sorted.len() {
+        let n = self.sorted.len();
+        let mut off_table = false;
+        for i in 0..n {
             let resting = s.objects[i].linvel.norm() < self.settings.max_object_speed as f64;
-            self.placed[i] = scene.object_in_bin(i, self.assignment[i]) && !s.grasped(i);
+            let released = !s.grasped(i);
+            self.placed[i] = scene.object_in_bin(i, self.assignment[i]) && released;
             self.sorted[i] = self.placed[i] && resting;
+            let off = scene.object_off_table(i);
+            let misplaced = released
+                && resting
+                && (0..self.bins.len())
+                    .any(|j| j != self.assignment[i] && scene.object_in_bin(i, j));
+            self.lost[i] = off || misplaced;
+            off_table |= off;
         }
         let count = self.sorted.iter().filter(|s| **s).count();
-        let off = (0..self.sorted.len()).any(|i| scene.object_off_table(i));
+        let lost = self.lost.iter().filter(|l| **l).count();
         let active = self.active();
-        let grasped = active.is_some_and(|i| s.grasped(i));
+        // Nothing left to do but objects lost: the episode ends without success.
+        let failure = (active.is_none() && lost > 0).then_some(if off_table {
+            EpisodeEvent::ObjectOffTable
+        } else {
+            EpisodeEvent::ObjectMisplaced
+        });
+        let by_policy = (0..n)
+            .filter(|&i| self.sorted[i] && !self.started_sorted[i])
+            .count();
         Evaluation {
-            success: count == self.sorted.len(),
-            failure: off.then_some(EpisodeEvent::ObjectOffTable),
+            success: count == n,
+            failure,
             flags: SortFlags {
                 objects_sorted: count,
-                objects: self.sorted.len(),
-                grasped,
+                objects: n,
+                started_sorted: self.started_sorted.iter().filter(|s| **s).count(),
+                sorted_by_policy: by_policy,
+                objects_lost: lost,
+                grasped: active.is_some_and(|i| s.grasped(i)),
             },
         }
     }
@@ -424,18 +540,25 @@ impl Task for Sort {
         // active object pays as much as the pick-and-place task's carry does.
         terms.set("progress", placed + stage - n);
         terms.set("object_sorted", newly as f32 * self.reward.object_sorted);
-        let off = e.failure.is_some();
-        terms.set("off_table", if off { -(steps_left as f32) } else { 0.0 });
+        // Ending early with objects lost costs what the steps left would have (−1 a step for
+        // each): losing one is never a way out.
+        let lost = match e.failure {
+            Some(_) => -(e.flags.objects_lost as f32) * steps_left as f32,
+            None => 0.0,
+        };
+        terms.set("lost", lost);
         terms.set("success", if e.success { self.reward.success } else { 0.0 });
         terms
     }
 
     fn describe(&self, _s: &ArmState) -> String {
         format!(
-            "bins {:?}, placed {:?}, sorted {:?}, active {:?}",
+            "bins {:?}, order {:?}, placed {:?}, sorted {:?}, lost {:?}, active {:?}",
             self.assignment,
+            self.order,
             self.placed,
             self.sorted,
+            self.lost,
             self.active()
         )
     }
