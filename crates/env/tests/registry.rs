@@ -71,27 +71,20 @@ fn unknown_ids_and_keys_are_errors_that_name_them() {
         .unwrap();
     assert!(err.to_string().contains("max_episode_stepz"), "{err}");
 
-    let err = make("FaArmSort-v0", &table("[task]\nnum_objects = 9"))
-        .err()
-        .unwrap();
-    assert!(
-        matches!(&err, EnvError::Config { key, .. } if key == "task.num_objects"),
-        "{err}"
-    );
-    let err = make("FaArmSort-v0", &table("[task]\nobject_clearance = -0.01"))
-        .err()
-        .unwrap();
-    assert!(
-        matches!(&err, EnvError::Config { key, .. } if key == "task.object_clearance"),
-        "{err}"
-    );
-    let err = make("FaArmSort-v0", &table("[task]\nstart_sorted_max = 3"))
-        .err()
-        .unwrap();
-    assert!(
-        matches!(&err, EnvError::Config { key, .. } if key == "task.start_sorted_max"),
-        "{err}"
-    );
+    // Sorting's own checks name their keys.
+    for (setting, key) in [
+        ("num_objects = 9", "task.num_objects"),
+        ("object_clearance = -0.01", "task.object_clearance"),
+        ("start_sorted_max = 3", "task.start_sorted_max"),
+    ] {
+        let err = make("FaArmSort-v0", &table(&format!("[task]\n{setting}")))
+            .err()
+            .unwrap();
+        assert!(
+            matches!(&err, EnvError::Config { key: k, .. } if k == key),
+            "{setting}: {err}"
+        );
+    }
 
     let err = make("Pendulum-v1", &table("g = 9.81")).err().unwrap();
     assert!(err.to_string().contains("no settings"), "{err}");

@@ -17,7 +17,7 @@ use crate::arm::{
 use crate::config::{check_at_least_one, check_non_negative};
 use crate::core::{EpisodeEvent, NamedValues, RenderMode};
 use crate::error::{EnvError, Result};
-use fairgrasp_sim::rapier3d::na::Vector3;
+use fairgrasp_sim::rapier3d::na::{Point3, Vector3};
 use fairgrasp_sim::scene::{BinConfig, ObjectConfig, ObjectShape, Scene, SceneConfig};
 use rand::Rng;
 use rand::seq::SliceRandom;
@@ -44,6 +44,10 @@ const SPIN_DAMPING: f32 = 5.0;
 /// How far inside its bin's walls a released object's centre must be to count as dropped into
 /// it (m): less than the smallest object's half width, so one lying against a wall counts.
 const WALL_MARGIN: f64 = 0.015;
+
+/// Height above its bin's floor an object that starts sorted is dropped from (m): it settles
+/// before the episode begins.
+const START_GAP: f64 = 0.002;
 
 /// Bin colours, in bin order: red, blue, green (linear RGB).
 const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
@@ -291,8 +295,8 @@ impl Sort {
         let base = scene.base_pose();
         for &i in &self.order[..k] {
             let mut pose = scene.object_state(i).pose;
-            let slot = base * fairgrasp_sim::rapier3d::na::Point3::from(self.slot_point(i));
-            let rest = slot.z + scene.object_half_height(i) + 0.002;
+            let slot = base * Point3::from(self.slot_point(i));
+            let rest = slot.z + scene.object_half_height(i) + START_GAP;
             pose.translation.vector = Vector3::new(slot.x, slot.y, rest);
             scene.set_object_pose(i, &pose)?;
             self.started_sorted[i] = true;
