@@ -412,12 +412,7 @@ fn scripted(args: &ScriptedArgs) -> Result<()> {
                 let goal = |e: &SortEnv, i| {
                     Some(world_goal(e.scene().base_pose(), e.task().drop_point(i)))
                 };
-                // The task's order, less the objects that start sorted.
-                let objects = |e: &SortEnv| {
-                    let task = e.task();
-                    let to_sort = |i: &usize| !task.started_sorted()[*i];
-                    task.order().iter().copied().filter(to_sort).collect()
-                };
+                let objects = |e: &SortEnv| e.task().objects_to_sort();
                 scripted_episode(&mut env, seed, goal, objects, true)
             })
         }

@@ -284,6 +284,13 @@ impl Sort {
         &self.order
     }
 
+    /// The objects the policy has to sort this episode, in their order: those that did not
+    /// start sorted.
+    pub fn objects_to_sort(&self) -> Vec<usize> {
+        let to_sort = |i: &usize| !self.started_sorted[*i];
+        self.order.iter().copied().filter(to_sort).collect()
+    }
+
     /// Objects that started this episode resting in their bins.
     pub fn started_sorted(&self) -> &[bool] {
         &self.started_sorted
