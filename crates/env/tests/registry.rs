@@ -76,6 +76,7 @@ fn unknown_ids_and_keys_are_errors_that_name_them() {
         ("num_objects = 9", "task.num_objects"),
         ("object_clearance = -0.01", "task.object_clearance"),
         ("start_sorted_max = 3", "task.start_sorted_max"),
+        ("start_above_bin = 1.5", "task.start_above_bin"),
     ] {
         let err = make("FaArmSort-v0", &table(&format!("[task]\n{setting}")))
             .err()

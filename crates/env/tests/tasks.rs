@@ -184,6 +184,49 @@ fn sorting_draws_an_order_and_starts_with_up_to_its_maximum_sorted() {
 }
 
 #[test]
+fn sorting_can_start_with_the_tcp_above_the_bin_last_filled() {
+    let mut env = sort_env(|c| {
+        c.task.start_sorted_max = 2;
+        c.task.start_above_bin = 1.0;
+    });
+    let mut plain = sort_env(|c| c.task.start_sorted_max = 2);
+    let (mut above, mut at_home) = (0, 0);
+    for seed in 0..12 {
+        env.reset(Some(seed)).unwrap();
+        plain.reset(Some(seed)).unwrap();
+        let home = plain.scene().tcp_pose().translation.vector;
+        let task = env.task();
+        let k = task.started_sorted().iter().filter(|s| **s).count();
+        let tcp = env.scene().tcp_pose().translation.vector;
+        if k == 0 {
+            assert!((tcp - home).norm() < 1e-3, "seed {seed}: {tcp:?}");
+            at_home += 1;
+            continue;
+        }
+        // Over the last sorted object's bin, inside its walls and above them.
+        let last = task.order()[k - 1];
+        let bin = env
+            .scene()
+            .bin_pose(task.assignment()[last])
+            .translation
+            .vector;
+        assert!((tcp.x - bin.x).abs() < 0.1, "seed {seed}: {tcp:?} {bin:?}");
+        assert!((tcp.y - bin.y).abs() < 0.1, "seed {seed}: {tcp:?} {bin:?}");
+        assert!(tcp.z > bin.z + 0.08, "seed {seed}: {tcp:?} {bin:?}");
+        // It stays there: the arm holds the pose it starts in, the sorted objects in their bins.
+        for _ in 0..10 {
+            env.step(&WAIT).unwrap();
+        }
+        let moved = (env.scene().tcp_pose().translation.vector - tcp).norm();
+        assert!(moved < 0.01, "seed {seed}: moved {moved} m");
+        let sorted = env.step(&WAIT).unwrap().info.extras.get("objects_sorted");
+        assert_eq!(sorted, Some(k as f32), "seed {seed}");
+        above += 1;
+    }
+    assert!(above > 0 && at_home > 0, "{above} {at_home}");
+}
+
+#[test]
 fn an_object_off_the_table_is_skipped_and_the_last_lost_ends_the_episode() {
     use fairgrasp_env::EpisodeEvent;
     use fairgrasp_env::arm::erased::ArmWorld;

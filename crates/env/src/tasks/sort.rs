@@ -49,6 +49,10 @@ const WALL_MARGIN: f64 = 0.015;
 /// before the episode begins.
 const START_GAP: f64 = 0.002;
 
+/// How far from its drop point, along x and y, a TCP that starts above a bin may be (m): where
+/// a policy lets go varies.
+const START_ABOVE_JITTER: f64 = 0.03;
+
 /// Bin colours, in bin order: red, blue, green (linear RGB).
 const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
 
@@ -105,6 +109,11 @@ pub struct SortSettings {
     /// across the task for training. `max_episode_steps` is for nothing sorted; an episode
     /// with `k` of `n` sorted gets its `(n − k)/n` share.
     pub start_sorted_max: usize,
+    /// The share of the episodes starting with objects sorted in which the TCP starts above
+    /// the bin the last of them went into, as it would be just after dropping it (else at
+    /// home): the reach from a bin to the next object, which otherwise follows only a
+    /// successful placement.
+    pub start_above_bin: f32,
     /// Sort the objects in a random order each episode (else in index order).
     pub random_order: bool,
     /// How [`crate::Env::render`] renders; `None`: it returns nothing.
@@ -125,6 +134,7 @@ impl Default for SortSettings {
             bin_inner_size: [0.2, 0.2],
             max_object_speed: 0.05,
             start_sorted_max: 0,
+            start_above_bin: 0.0,
             random_order: true,
             render_mode: None,
         }
@@ -189,6 +199,12 @@ impl TaskSettings for SortSettings {
                     "must be below task.num_objects ({}): an episode needs an object to sort",
                     self.num_objects
                 ),
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.start_above_bin) {
+            return Err(EnvError::config(
+                "task.start_above_bin",
+                "must be a share in [0, 1]",
             ));
         }
         check_non_negative("task.max_object_speed", self.max_object_speed)
@@ -310,6 +326,22 @@ impl Sort {
         }
         if k > 0 {
             scene.settle()?;
+        }
+        Ok(())
+    }
+
+    /// Moves the arm, its gripper open, so that the TCP is above object `i`'s drop point (within
+    /// [`START_ABOVE_JITTER`] along x and y), pointing down as at home. Stays at home where no
+    /// joint vector reaches there.
+    fn start_above_bin(&self, scene: &mut Scene, i: usize, rng: &mut ChaCha8Rng) -> Result<()> {
+        let mut jitter = || rng.random_range(-START_ABOVE_JITTER..=START_ABOVE_JITTER);
+        let offset = Vector3::new(jitter(), jitter(), 0.0);
+        let mut target = scene.tcp_pose();
+        target.translation.vector =
+            (scene.base_pose() * Point3::from(self.drop_point(i) + offset)).coords;
+        if let Ok(q) = scene.solve_ik(&target, &scene.arm_positions()) {
+            scene.set_arm_positions(&q)?;
+            scene.set_arm_targets(&q)?;
         }
         Ok(())
     }
@@ -455,6 +487,13 @@ impl Task for Sort {
         self.started_sorted.fill(false);
         let k = rng.random_range(0..=self.settings.start_sorted_max);
         self.start_sorted(scene, k)?;
+        // Drawn only when asked for, so that other configurations draw as before.
+        if k > 0
+            && self.settings.start_above_bin > 0.0
+            && rng.random::<f32>() < self.settings.start_above_bin
+        {
+            self.start_above_bin(scene, self.order[k - 1], rng)?;
+        }
         // Objects that start sorted are paid for and placed already.
         self.paid.clone_from(&self.started_sorted);
         self.placed.clone_from(&self.started_sorted);
