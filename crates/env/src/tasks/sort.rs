@@ -45,6 +45,10 @@ const SPIN_DAMPING: f32 = 5.0;
 /// it (m): less than the smallest object's half width, so one lying against a wall counts.
 const WALL_MARGIN: f64 = 0.015;
 
+/// The fastest an object let go over its bin may drift sideways and still earn the release
+/// (m/s): one thrown from a moving gripper flies over the far wall, out of reach.
+const RELEASE_SPEED: f64 = 0.15;
+
 /// Height above its bin's floor an object that starts sorted is dropped from (m): it settles
 /// before the episode begins.
 const START_GAP: f64 = 0.002;
@@ -361,10 +365,12 @@ impl Sort {
 
     /// The active object's stage in [0, 1]: reach (up to 1/4), grasp (1/4), lift over the
     /// walls (1/4) and carry to the drop point (1/4, earned only as high as the lift: no
-    /// dragging through a wall); 1 once released over its bin clear of the walls.
+    /// dragging through a wall); 1 once let go over its bin clear of the walls, drifting
+    /// sideways slower than [`RELEASE_SPEED`].
     fn stage(&self, i: usize, s: &ArmState) -> f32 {
         if !s.grasped(i) {
-            if self.over_own_bin(i, s) {
+            let drift = s.objects[i].linvel.xy().norm();
+            if self.over_own_bin(i, s) && drift <= RELEASE_SPEED {
                 return 1.0;
             }
             let reach = 1.0 - (4.0 * s.tcp_to_object(i).norm() as f32).tanh();
