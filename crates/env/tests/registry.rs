@@ -77,6 +77,7 @@ fn unknown_ids_and_keys_are_errors_that_name_them() {
         ("object_clearance = -0.01", "task.object_clearance"),
         ("start_sorted_max = 3", "task.start_sorted_max"),
         ("start_above_bin = 1.5", "task.start_above_bin"),
+        ("start_sorted_min = 1", "task.start_sorted_min"),
     ] {
         let err = make("FaArmSort-v0", &table(&format!("[task]\n{setting}")))
             .err()

@@ -181,6 +181,16 @@ fn sorting_draws_an_order_and_starts_with_up_to_its_maximum_sorted() {
         assert_eq!(env.task().order(), &[0, 1, 2]);
         assert!(env.task().started_sorted().iter().all(|s| !s));
     }
+    // Always two sorted, one to go, when the least is the most.
+    let mut env = sort_env(|c| {
+        c.task.start_sorted_min = 2;
+        c.task.start_sorted_max = 2;
+    });
+    for seed in 0..5 {
+        env.reset(Some(seed)).unwrap();
+        let started = env.task().started_sorted().iter().filter(|s| **s).count();
+        assert_eq!(started, 2, "seed {seed}");
+    }
 }
 
 #[test]

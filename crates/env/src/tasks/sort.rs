@@ -113,6 +113,10 @@ pub struct SortSettings {
     /// across the task for training. `max_episode_steps` is for nothing sorted; an episode
     /// with `k` of `n` sorted gets its `(n − k)/n` share.
     pub start_sorted_max: usize,
+    /// The least number of objects an episode starts with sorted (at most
+    /// `start_sorted_max`): with both at `num_objects` − 1, every episode is one object's pick
+    /// and place among the others.
+    pub start_sorted_min: usize,
     /// The share of the episodes starting with objects sorted in which the TCP starts above
     /// the bin the last of them went into, as it would be just after dropping it (else at
     /// home): the reach from a bin to the next object, which otherwise follows only a
@@ -138,6 +142,7 @@ impl Default for SortSettings {
             bin_inner_size: [0.2, 0.2],
             max_object_speed: 0.05,
             start_sorted_max: 0,
+            start_sorted_min: 0,
             start_above_bin: 0.0,
             random_order: true,
             render_mode: None,
@@ -202,6 +207,15 @@ impl TaskSettings for SortSettings {
                 format!(
                     "must be below task.num_objects ({}): an episode needs an object to sort",
                     self.num_objects
+                ),
+            ));
+        }
+        if self.start_sorted_min > self.start_sorted_max {
+            return Err(EnvError::config(
+                "task.start_sorted_min",
+                format!(
+                    "must be at most task.start_sorted_max ({})",
+                    self.start_sorted_max
                 ),
             ));
         }
@@ -491,7 +505,7 @@ impl Task for Sort {
             self.order.shuffle(rng);
         }
         self.started_sorted.fill(false);
-        let k = rng.random_range(0..=self.settings.start_sorted_max);
+        let k = rng.random_range(self.settings.start_sorted_min..=self.settings.start_sorted_max);
         self.start_sorted(scene, k)?;
         // Drawn only when asked for, so that other configurations draw as before.
         if k > 0
