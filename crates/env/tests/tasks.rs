@@ -236,6 +236,69 @@ fn sorting_can_start_with_the_tcp_above_the_bin_last_filled() {
     assert!(above > 0 && at_home > 0, "{above} {at_home}");
 }
 
+/// Plays one sorting episode: the scripted pick and place of each object left, in order.
+fn scripted_sort(env: &mut SortEnv) -> bool {
+    for i in env.task().objects_to_sort() {
+        let base = env.scene().base_pose();
+        let drop = base * Point3::from(env.task().drop_point(i));
+        let mut policy = ScriptedGraspPolicy::for_object(env, i, Some(drop.coords), true);
+        while !policy.done() {
+            let step = env.step(&policy.act(env)).unwrap();
+            if step.terminated || step.truncated {
+                return step.info.success;
+            }
+        }
+    }
+    false
+}
+
+#[test]
+fn the_curriculum_allows_more_objects_left_as_episodes_succeed() {
+    let mut env = sort_env(|c| {
+        c.task.start_sorted_max = 2;
+        c.task.curriculum_success = Some(0.5);
+    });
+    let left = |env: &SortEnv| 3 - env.task().started_sorted().iter().filter(|s| **s).count();
+    // Failing episodes open nothing: one object left, always.
+    for seed in 0..6 {
+        env.reset(Some(seed)).unwrap();
+        assert_eq!(left(&env), 1, "seed {seed}");
+        while !env
+            .step(&WAIT)
+            .map(|s| s.terminated || s.truncated)
+            .unwrap()
+        {}
+    }
+    // Successes open two left (7 in a row reach 0.5), never three before two-left ones succeed.
+    let mut seen = [0; 4];
+    let mut successes = 0;
+    for seed in 6..40 {
+        env.reset(Some(seed)).unwrap();
+        seen[left(&env)] += 1;
+        if left(&env) == 1 {
+            successes += scripted_sort(&mut env) as u32;
+        } else {
+            assert!(
+                successes >= 6,
+                "{successes} successes opened {}",
+                left(&env)
+            );
+            assert_eq!(left(&env), 2);
+            while !env
+                .step(&WAIT)
+                .map(|s| s.terminated || s.truncated)
+                .unwrap()
+            {}
+        }
+    }
+    assert!(seen[2] > 0 && seen[3] == 0, "{seen:?}");
+    // The count is logged with every step.
+    env.reset(Some(40)).unwrap();
+    let to_sort = left(&env) as f32;
+    let step = env.step(&WAIT).unwrap();
+    assert_eq!(step.info.extras.get("objects_to_sort"), Some(to_sort));
+}
+
 #[test]
 fn an_object_off_the_table_is_skipped_and_the_last_lost_ends_the_episode() {
     use fairgrasp_env::EpisodeEvent;

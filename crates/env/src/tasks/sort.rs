@@ -57,6 +57,10 @@ const START_GAP: f64 = 0.002;
 /// a policy lets go varies.
 const START_ABOVE_JITTER: f64 = 0.03;
 
+/// The weight of each episode in the curriculum's recent success rate (an exponential
+/// average: about the last 10 episodes).
+const CURRICULUM_RATE: f32 = 0.1;
+
 /// Bin colours, in bin order: red, blue, green (linear RGB).
 const BIN_COLORS: [[f32; 3]; 3] = [[0.8, 0.15, 0.15], [0.15, 0.3, 0.85], [0.15, 0.7, 0.2]];
 
@@ -117,6 +121,12 @@ pub struct SortSettings {
     /// `start_sorted_max`): with both at `num_objects` − 1, every episode is one object's pick
     /// and place among the others.
     pub start_sorted_min: usize,
+    /// A curriculum over the objects left to sort, for training with start states: each env
+    /// first starts its episodes with the fewest objects left (`num_objects` −
+    /// `start_sorted_max`), and allows one more each time its recent success rate (about the
+    /// last 10 episodes) with the most it allows reaches this. `None`: every count from the
+    /// start.
+    pub curriculum_success: Option<f32>,
     /// The share of the episodes starting with objects sorted in which the TCP starts above
     /// the bin the last of them went into, as it would be just after dropping it (else at
     /// home): the reach from a bin to the next object, which otherwise follows only a
@@ -143,6 +153,7 @@ impl Default for SortSettings {
             max_object_speed: 0.05,
             start_sorted_max: 0,
             start_sorted_min: 0,
+            curriculum_success: None,
             start_above_bin: 0.0,
             random_order: true,
             render_mode: None,
@@ -219,6 +230,14 @@ impl TaskSettings for SortSettings {
                 ),
             ));
         }
+        if let Some(bar) = self.curriculum_success
+            && !(0.0..=1.0).contains(&bar)
+        {
+            return Err(EnvError::config(
+                "task.curriculum_success",
+                "must be a success rate in [0, 1]",
+            ));
+        }
         if !(0.0..=1.0).contains(&self.start_above_bin) {
             return Err(EnvError::config(
                 "task.start_above_bin",
@@ -288,6 +307,35 @@ pub struct Sort {
     /// Objects off the table, or let go in a bin not their own, at the last evaluation: the
     /// task goes on without them.
     lost: Vec<bool>,
+    /// The curriculum's state in this env.
+    curriculum: Curriculum,
+}
+
+/// How far an env's curriculum over the objects left has gone.
+#[derive(Clone, Debug)]
+struct Curriculum {
+    /// The most objects left an episode may start with.
+    allowed_left: usize,
+    /// Recent success rate of the episodes that started with `allowed_left` objects left.
+    recent_success: f32,
+    /// Objects left at the start of the episode being played; `None` before the first.
+    episode_left: Option<usize>,
+}
+
+impl Curriculum {
+    /// Counts the episode just played (`success`); opens one more object left when the
+    /// recent success rate at the most allowed reaches `bar`, up to `most_left`.
+    fn record(&mut self, success: bool, bar: f32, most_left: usize) {
+        if self.episode_left != Some(self.allowed_left) {
+            return;
+        }
+        let outcome = if success { 1.0 } else { 0.0 };
+        self.recent_success += CURRICULUM_RATE * (outcome - self.recent_success);
+        if self.recent_success >= bar && self.allowed_left < most_left {
+            self.allowed_left += 1;
+            self.recent_success = 0.0;
+        }
+    }
 }
 
 impl Sort {
@@ -432,6 +480,10 @@ impl TaskFlags for SortFlags {
                 "fraction_sorted_by_policy",
                 self.sorted_by_policy as f32 / to_sort as f32,
             )
+            .with(
+                "objects_to_sort",
+                (self.objects - self.started_sorted) as f32,
+            )
             .with("objects_lost", self.objects_lost as f32)
             .with("grasped", self.grasped as u8 as f32)
     }
@@ -492,6 +544,11 @@ impl Task for Sort {
             placed: vec![false; n],
             sorted: vec![false; n],
             lost: vec![false; n],
+            curriculum: Curriculum {
+                allowed_left: n - config.task.start_sorted_max,
+                recent_success: 0.0,
+                episode_left: None,
+            },
         })
     }
 
@@ -505,7 +562,15 @@ impl Task for Sort {
             self.order.shuffle(rng);
         }
         self.started_sorted.fill(false);
-        let k = rng.random_range(self.settings.start_sorted_min..=self.settings.start_sorted_max);
+        let (n, max) = (self.order.len(), self.settings.start_sorted_max);
+        let mut min = self.settings.start_sorted_min;
+        if let Some(bar) = self.settings.curriculum_success {
+            let success = self.sorted.iter().all(|s| *s);
+            self.curriculum.record(success, bar, n - min);
+            min = min.max(n - self.curriculum.allowed_left);
+        }
+        let k = rng.random_range(min..=max);
+        self.curriculum.episode_left = Some(n - k);
         self.start_sorted(scene, k)?;
         // Drawn only when asked for, so that other configurations draw as before.
         if k > 0
