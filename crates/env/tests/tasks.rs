@@ -386,6 +386,18 @@ fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
     assert_eq!(env.task().assignment().len(), n);
     let left = check(&obs, &env, order[1]);
     assert!((left - 2.0 / 3.0).abs() < 1e-6, "{left}");
+    // Without the others: the active object's blocks alone, whatever the number of objects.
+    for objects in [1, 3, 5] {
+        let mut alone = sort_env(|c| {
+            c.task.num_objects = objects;
+            c.task.observe_others = false;
+        });
+        let mut full = sort_env(|c| c.task.num_objects = objects);
+        assert_eq!(alone.observation_space().low.len(), leading + 5);
+        let (a, _) = alone.reset(Some(4)).unwrap();
+        let (f, _) = full.reset(Some(4)).unwrap();
+        assert_eq!(a[..], f[..leading + 5], "{objects} objects");
+    }
 }
 
 #[test]

@@ -134,6 +134,12 @@ pub struct SortSettings {
     pub start_above_bin: f32,
     /// Sort the objects in a random order each episode (else in index order).
     pub random_order: bool,
+    /// Observe every object (its position from the TCP, placed and active flags) and the
+    /// share left after the active object's blocks. Without them the observation is the same
+    /// whatever the number of objects and how many are placed, so a policy that learnt to sort
+    /// the last object sorts the first alike; a scripted sorter, which sees only the active
+    /// object, sorts 100 of 100.
+    pub observe_others: bool,
     /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     pub render_mode: Option<RenderMode>,
 }
@@ -156,6 +162,7 @@ impl Default for SortSettings {
             curriculum_success: None,
             start_above_bin: 0.0,
             random_order: true,
+            observe_others: true,
             render_mode: None,
         }
     }
@@ -604,6 +611,9 @@ impl Task for Sort {
         out.push3(ObjectPosition, &(drop - object.pose.translation.vector));
         // What sorting needs beyond it: the active object's size and how its sides lie, ...
         shape_observation(s, active, out);
+        if !self.settings.observe_others {
+            return;
+        }
         // ... every object from the TCP (the ones in the way), placed or not, which is active ...
         let tcp = s.tcp.translation.vector;
         for (i, o) in s.objects.iter().enumerate() {
