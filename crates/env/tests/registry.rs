@@ -78,6 +78,7 @@ fn unknown_ids_and_keys_are_errors_that_name_them() {
         ("start_sorted_max = 3", "task.start_sorted_max"),
         ("start_above_bin = 1.5", "task.start_above_bin"),
         ("start_sorted_min = 1", "task.start_sorted_min"),
+        ("curriculum_success = 2.0", "task.curriculum_success"),
     ] {
         let err = make("FaArmSort-v0", &table(&format!("[task]\n{setting}")))
             .err()

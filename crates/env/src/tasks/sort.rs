@@ -45,10 +45,6 @@ const SPIN_DAMPING: f32 = 5.0;
 /// it (m): less than the smallest object's half width, so one lying against a wall counts.
 const WALL_MARGIN: f64 = 0.015;
 
-/// The fastest an object let go over its bin may drift sideways and still earn the release
-/// (m/s): one thrown from a moving gripper flies over the far wall, out of reach.
-const RELEASE_SPEED: f64 = 0.15;
-
 /// Height above its bin's floor an object that starts sorted is dropped from (m): it settles
 /// before the episode begins.
 const START_GAP: f64 = 0.002;
@@ -263,6 +259,10 @@ pub struct SortReward {
     pub object_sorted: f32,
     /// Paid on success (every object sorted).
     pub success: f32,
+    /// The fastest an object let go over its bin may drift sideways and still earn the
+    /// release's stage (m/s; unset: any): one thrown from a moving gripper flies over the far
+    /// wall, out of reach.
+    pub release_drift: Option<f32>,
 }
 
 impl Default for SortReward {
@@ -270,6 +270,7 @@ impl Default for SortReward {
         Self {
             object_sorted: 5.0,
             success: 10.0,
+            release_drift: None,
         }
     }
 }
@@ -277,6 +278,9 @@ impl Default for SortReward {
 impl RewardSettings for SortReward {
     fn validate(&self) -> Result<()> {
         check_non_negative("reward.object_sorted", self.object_sorted)?;
+        if let Some(v) = self.release_drift {
+            check_non_negative("reward.release_drift", v)?;
+        }
         check_non_negative("reward.success", self.success)
     }
 }
@@ -435,11 +439,12 @@ impl Sort {
     /// The active object's stage in [0, 1]: reach (up to 1/4), grasp (1/4), lift over the
     /// walls (1/4) and carry to the drop point (1/4, earned only as high as the lift: no
     /// dragging through a wall); 1 once let go over its bin clear of the walls, drifting
-    /// sideways slower than [`RELEASE_SPEED`].
+    /// sideways no faster than `reward.release_drift` where set.
     fn stage(&self, i: usize, s: &ArmState) -> f32 {
         if !s.grasped(i) {
             let drift = s.objects[i].linvel.xy().norm();
-            if self.over_own_bin(i, s) && drift <= RELEASE_SPEED {
+            let slow = self.reward.release_drift.is_none_or(|v| drift <= v as f64);
+            if self.over_own_bin(i, s) && slow {
                 return 1.0;
             }
             let reach = 1.0 - (4.0 * s.tcp_to_object(i).norm() as f32).tanh();
