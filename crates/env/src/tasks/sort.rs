@@ -7,7 +7,9 @@
 //! another bin: skipped), and the observation (pick and place's, with the active object's drop
 //! point as its goal) and the staged reward centre on it. Success: every object rests in its
 //! bin. For training, episodes can start with some objects already sorted
-//! (`start_sorted_max`), their time limit shortened to the share of objects left.
+//! (`start_sorted_min`…`start_sorted_max`, or a curriculum over the objects left), their time
+//! limit shortened to the share of objects left, and the TCP above the bin last filled
+//! (`start_above_bin`).
 
 use crate::arm::observation::{rich_observation, shape_observation};
 use crate::arm::{
