@@ -93,9 +93,7 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
         let mut bonuses = 0.0;
         let mut progress = f32::NEG_INFINITY;
         'episode: for (k, &i) in order.iter().enumerate() {
-            let base = env.scene().base_pose();
-            let drop = base * Point3::from(env.task().drop_point(i));
-            let mut policy = ScriptedGraspPolicy::for_object(env, i, Some(drop.coords), true);
+            let mut policy = scripted_drop(env, i);
             while !policy.done() {
                 let step = env.step(&policy.act(env)).unwrap();
                 let sorted = step.info.extras.get("objects_sorted").unwrap();
@@ -127,6 +125,12 @@ fn a_scripted_sort_through_step_puts_every_object_in_its_bin() {
         assert_eq!(bonuses, 5.0 * sorted_seen, "seed {seed}");
     }
     assert_eq!(successes, 14);
+}
+
+/// The scripted pick of object `i`, dropped above its own slot.
+fn scripted_drop(env: &SortEnv, i: usize) -> ScriptedGraspPolicy {
+    let drop = env.scene().base_pose() * Point3::from(env.task().drop_point(i));
+    ScriptedGraspPolicy::for_object(env, i, Some(drop.coords), true)
 }
 
 fn sort_env(configure: impl FnOnce(&mut SortConfig)) -> SortEnv {
@@ -247,9 +251,7 @@ fn sorting_can_start_with_the_tcp_above_the_bin_last_filled() {
 /// Plays one sorting episode: the scripted pick and place of each object left, in order.
 fn scripted_sort(env: &mut SortEnv) -> bool {
     for i in env.task().objects_to_sort() {
-        let base = env.scene().base_pose();
-        let drop = base * Point3::from(env.task().drop_point(i));
-        let mut policy = ScriptedGraspPolicy::for_object(env, i, Some(drop.coords), true);
+        let mut policy = scripted_drop(env, i);
         while !policy.done() {
             let step = env.step(&policy.act(env)).unwrap();
             if step.terminated || step.truncated {
@@ -382,9 +384,7 @@ fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
     };
     assert_eq!(check(&obs, &env, order[0]), 1.0);
     // Sort that object: the block moves on to the next, and a third of the objects is done.
-    let base = env.scene().base_pose();
-    let drop = base * Point3::from(env.task().drop_point(order[0]));
-    let mut policy = ScriptedGraspPolicy::for_object(&env, order[0], Some(drop.coords), true);
+    let mut policy = scripted_drop(&env, order[0]);
     let mut obs = obs;
     let mut steps = 0;
     while (!policy.done() || obs[obs.len() - 1] == 1.0) && steps < 150 {

@@ -444,8 +444,11 @@ impl Sort {
     /// sideways no faster than `reward.release_drift` where set.
     fn stage(&self, i: usize, s: &ArmState) -> f32 {
         if !s.grasped(i) {
-            let drift = s.objects[i].linvel.xy().norm();
-            let slow = self.reward.release_drift.is_none_or(|v| drift <= v as f64);
+            let drift = || s.objects[i].linvel.xy().norm();
+            let slow = self
+                .reward
+                .release_drift
+                .is_none_or(|v| drift() <= v as f64);
             if self.over_own_bin(i, s) && slow {
                 return 1.0;
             }
