@@ -248,6 +248,52 @@ fn sorting_can_start_with_the_tcp_above_the_bin_last_filled() {
     assert!(above > 0 && at_home > 0, "{above} {at_home}");
 }
 
+#[test]
+fn with_return_home_each_placement_sends_the_arm_home_open() {
+    for return_home in [true, false] {
+        let mut env = sort_env(|c| {
+            c.task.return_home = return_home;
+            c.task.max_episode_steps = 600;
+        });
+        for seed in 0..3 {
+            env.reset(Some(seed)).unwrap();
+            let home = env.scene().tcp_pose().translation.vector;
+            let (mut returns, mut success) = (0, false);
+            'episode: for i in env.task().objects_to_sort() {
+                let mut policy = scripted_drop(&env, i);
+                let mut away = false;
+                while !policy.done() {
+                    let step = env.step(&policy.act(&env)).unwrap();
+                    if step.terminated || step.truncated {
+                        success = step.info.success;
+                        break 'episode;
+                    }
+                    let tcp = env.scene().tcp_pose().translation.vector;
+                    // Home as the reset left it, sagged a few mm under gravity.
+                    let from_home = (tcp - home).norm();
+                    if away && from_home < 5e-3 {
+                        // Back at home the moment the object is let go in its bin, open.
+                        assert!(!env.scene().gripper_commanded_closed(), "seed {seed}");
+                        let sorted = step.info.extras.get("objects_sorted").unwrap();
+                        assert!(sorted <= (returns + 1) as f32, "seed {seed}");
+                        returns += 1;
+                        // It holds there: the actions in flight were dropped.
+                        env.step(&WAIT).unwrap();
+                        let held = (env.scene().tcp_pose().translation.vector - tcp).norm();
+                        assert!(held < 2e-3, "seed {seed}: drifted {held} m");
+                        break;
+                    }
+                    away |= from_home > 0.1;
+                }
+            }
+            assert!(success, "seed {seed}, return_home {return_home}");
+            // After every object but the last, and never without the setting.
+            let expected = if return_home { 2 } else { 0 };
+            assert_eq!(returns, expected, "seed {seed}");
+        }
+    }
+}
+
 /// Plays one sorting episode: the scripted pick and place of each object left, in order.
 fn scripted_sort(env: &mut SortEnv) -> bool {
     for i in env.task().objects_to_sort() {

@@ -507,6 +507,26 @@ impl<T: Task> ArmEnv<T> {
         }
     }
 
+    /// Teleports the arm to its home joint vector at rest, its drives holding it there and the
+    /// gripper commanded open; the actions in flight are dropped (no-ops replace them) and the
+    /// servo's set points restart from home. [`Task::return_home`].
+    fn send_arm_home(&mut self) -> Result<()> {
+        let home = self.scene.config().arm.home.clone();
+        self.scene.set_arm_positions(&home)?;
+        self.scene.set_arm_targets(&home)?;
+        let no_op = self.no_op_action();
+        let episode = self.episode.as_mut().expect("an episode is running");
+        match episode.gripper.as_mut() {
+            None => self.scene.set_gripper_open(true)?,
+            Some(g) => g.command(&self.scene, true),
+        }
+        for action in &mut episode.pending {
+            action.clone_from(&no_op);
+        }
+        episode.ramp = (self.config.control.servo).ramp(&self.scene, episode.speed_scale);
+        Ok(())
+    }
+
     fn no_op_action(&self) -> Vec<f32> {
         let mut a = vec![0.0; self.action_space.dim()];
         *a.last_mut().expect("action has a gripper entry") = 1.0;
@@ -802,12 +822,12 @@ impl<T: Task> Env for ArmEnv<T> {
             .zip(&self.action_space.high)
             .map(|(a, h)| a / h)
             .collect();
-        let state = ArmState::from_scene(&self.scene);
-        let reported = reported(&self.mapper, &state, &episode.joint_offset);
+        let mut state = ArmState::from_scene(&self.scene);
+        let mut reported = reported(&self.mapper, &state, &episode.joint_offset);
         let closing = !episode.command.gripper_open;
         let before = episode.state.objects.first().map(|o| o.pose);
         let mut estimator = episode.estimator.take();
-        let observed = match (estimator.as_mut(), before) {
+        let mut observed = match (estimator.as_mut(), before) {
             (Some(e), Some(before)) => {
                 let early = early.map(|s| {
                     let seen = self::reported(&self.mapper, &s, &episode.joint_offset);
@@ -822,6 +842,27 @@ impl<T: Task> Env for ArmEnv<T> {
         // Judged before observing: the observation shows what the task now asks for (sorting's
         // next object once one is placed).
         let mut evaluation = self.task.evaluate(&self.scene, &state);
+        if self.task.return_home() {
+            self.send_arm_home()?;
+            state = ArmState::from_scene(&self.scene);
+            let episode = self.episode.as_ref().expect("checked");
+            reported = self::reported(&self.mapper, &state, &episode.joint_offset);
+            if let Some(e) = estimator.as_mut() {
+                *e = StateEstimator::new();
+                self.facts.object = state.objects[0].clone();
+                let view = reported.as_ref().unwrap_or(&state);
+                let pose = state.objects[0].pose;
+                observed = Some(self.estimate(e, view, &pose, false, 0.0, speed_scale));
+            }
+            let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
+            let mut targets = self.scene.arm_targets();
+            let episode = self.episode.as_mut().expect("checked");
+            for (t, e) in targets.iter_mut().zip(&episode.joint_offset) {
+                *t += e;
+            }
+            episode.command = self.mapper.hold(view, targets);
+            evaluation = self.task.evaluate(&self.scene, &state);
+        }
         let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
         let obs = self.observe(view, &normalised, speed_scale);
         if obs.iter().any(|v| !v.is_finite()) {

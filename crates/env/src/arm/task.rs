@@ -108,6 +108,14 @@ pub trait Task: Send + Sized + 'static {
     /// Evaluates the step just taken.
     fn evaluate(&mut self, scene: &Scene, state: &ArmState) -> Evaluation<Self::Flags>;
 
+    /// Whether the arm goes back to its home pose, gripper open, after the step just evaluated:
+    /// a scripted move between the task's stages that the policy does not steer (sorting's
+    /// return between picks, as a cell's MoveJ home). The env teleports it there, drops the
+    /// actions in flight and evaluates the step again. `false` by default.
+    fn return_home(&mut self) -> bool {
+        false
+    }
+
     /// The success rule `evaluate` applies, as a judge of states alone for a new episode (the
     /// deployment loop judges its estimated states by it); `None` when success needs the
     /// simulator (sorting's bins).

@@ -132,6 +132,10 @@ pub struct SortSettings {
     pub start_above_bin: f32,
     /// Sort the objects in a random order each episode (else in index order).
     pub random_order: bool,
+    /// After each object placed, with objects left, the arm returns to its home pose with the
+    /// gripper open (a scripted move between picks, as a cell's MoveJ home): every pick starts
+    /// where the first did.
+    pub return_home: bool,
     /// Observe every object (its position from the TCP, placed and active flags) and the
     /// share left after the active object's blocks. Without them the observation is the same
     /// whatever the number of objects and how many are placed, so a policy that learnt to sort
@@ -160,6 +164,7 @@ impl Default for SortSettings {
             curriculum_success: None,
             start_above_bin: 0.0,
             random_order: true,
+            return_home: false,
             observe_others: true,
             render_mode: None,
         }
@@ -322,6 +327,9 @@ pub struct Sort {
     lost: Vec<bool>,
     /// The curriculum's state in this env.
     curriculum: Curriculum,
+    /// An object was placed at the last evaluation with objects left: the arm is to go home
+    /// (`return_home`).
+    return_due: bool,
 }
 
 /// How far an env's curriculum over the objects left has gone.
@@ -566,6 +574,7 @@ impl Task for Sort {
                 recent_success: 0.0,
                 episode_left: None,
             },
+            return_due: false,
         })
     }
 
@@ -601,6 +610,7 @@ impl Task for Sort {
         self.placed.clone_from(&self.started_sorted);
         self.sorted.clone_from(&self.started_sorted);
         self.lost.fill(false);
+        self.return_due = false;
         Ok(())
     }
 
@@ -638,6 +648,7 @@ impl Task for Sort {
 
     fn evaluate(&mut self, scene: &Scene, s: &ArmState) -> Evaluation<SortFlags> {
         let n = self.sorted.len();
+        let placed_before = self.placed.iter().filter(|p| **p).count();
         let mut off_table = false;
         for i in 0..n {
             let resting = s.objects[i].linvel.norm() < self.settings.max_object_speed as f64;
@@ -655,6 +666,8 @@ impl Task for Sort {
         let count = self.sorted.iter().filter(|s| **s).count();
         let lost = self.lost.iter().filter(|l| **l).count();
         let active = self.active();
+        let placed = self.placed.iter().filter(|p| **p).count();
+        self.return_due = self.settings.return_home && placed > placed_before && active.is_some();
         // Nothing left to do but objects lost: the episode ends without success.
         let failure = (active.is_none() && lost > 0).then_some(if off_table {
             EpisodeEvent::ObjectOffTable
@@ -704,6 +717,10 @@ impl Task for Sort {
         terms.set("lost", lost);
         terms.set("success", if e.success { self.reward.success } else { 0.0 });
         terms
+    }
+
+    fn return_home(&mut self) -> bool {
+        std::mem::take(&mut self.return_due)
     }
 
     fn describe(&self, _s: &ArmState) -> String {
