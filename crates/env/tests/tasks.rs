@@ -452,6 +452,16 @@ fn sortings_observation_begins_with_pick_and_places_around_the_active_object() {
         let (f, _) = full.reset(Some(4)).unwrap();
         assert_eq!(a[..], f[..leading + 5], "{objects} objects");
     }
+    // Without the others but with the count: the share left follows the active object's blocks.
+    let mut counted = sort_env(|c| {
+        c.task.observe_others = false;
+        c.task.observe_left = Some(true);
+        c.task.start_sorted_min = 1;
+        c.task.start_sorted_max = 1;
+    });
+    assert_eq!(counted.observation_space().low.len(), leading + 5 + 1);
+    let (obs, _) = counted.reset(Some(4)).unwrap();
+    assert!((obs[leading + 5] - 2.0 / 3.0).abs() < 1e-6, "{obs:?}");
 }
 
 #[test]

@@ -142,6 +142,11 @@ pub struct SortSettings {
     /// the last object sorts the first alike; a scripted sorter, which sees only the active
     /// object, sorts 100 of 100.
     pub observe_others: bool,
+    /// Observe the share of objects still to place last (unset: with the others). The reward's
+    /// level per step is minus the objects left, so a value function that cannot see the count
+    /// mistakes it for noise once episodes start with different counts (explained variance
+    /// fell from 0.72 to 0.56 as the curriculum opened two objects left, seed 42).
+    pub observe_left: Option<bool>,
     /// How [`crate::Env::render`] renders; `None`: it returns nothing.
     pub render_mode: Option<RenderMode>,
 }
@@ -166,6 +171,7 @@ impl Default for SortSettings {
             random_order: true,
             return_home: false,
             observe_others: true,
+            observe_left: None,
             render_mode: None,
         }
     }
@@ -631,17 +637,20 @@ impl Task for Sort {
         out.push3(ObjectPosition, &(drop - object.pose.translation.vector));
         // What sorting needs beyond it: the active object's size and how its sides lie, ...
         shape_observation(s, active, out);
-        if !self.settings.observe_others {
-            return;
-        }
         // ... every object from the TCP (the ones in the way), placed or not, which is active ...
-        let tcp = s.tcp.translation.vector;
-        for (i, o) in s.objects.iter().enumerate() {
-            out.push3(ObjectPosition, &(o.pose.translation.vector - tcp));
-            out.push1(None, self.placed[i] as u8 as f32);
-            out.push1(None, (i == active) as u8 as f32);
+        if self.settings.observe_others {
+            let tcp = s.tcp.translation.vector;
+            for (i, o) in s.objects.iter().enumerate() {
+                out.push3(ObjectPosition, &(o.pose.translation.vector - tcp));
+                out.push1(None, self.placed[i] as u8 as f32);
+                out.push1(None, (i == active) as u8 as f32);
+            }
         }
         // ... and the share of objects still to place.
+        let observe_left = (self.settings.observe_left).unwrap_or(self.settings.observe_others);
+        if !observe_left {
+            return;
+        }
         let left = self.placed.iter().filter(|p| !**p).count();
         out.push1(None, left as f32 / self.placed.len() as f32);
     }
