@@ -435,6 +435,18 @@ fn random_resets_place_five_objects_apart_on_the_table() {
         .map(|seed| closest_pair(&colliders, &spaced.reset(seed).unwrap()))
         .fold(f32::INFINITY, f32::min);
     assert!((0.028..0.06).contains(&closest), "closest pair {closest} m");
+    // Crowded: a layout that leaves no room for the last object is drawn again whole.
+    let mut config = scene.config().clone();
+    config.placement.size = [0.2, 0.2];
+    config.placement.clearance = 0.035;
+    let mut crowded = Scene::new(config).unwrap();
+    for seed in 0..40 {
+        let poses = crowded
+            .reset(seed)
+            .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        let closest = closest_pair(&colliders, &poses);
+        assert!(closest > 0.03, "seed {seed}: closest pair {closest} m");
+    }
 }
 
 #[test]
