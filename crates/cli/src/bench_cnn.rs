@@ -5,6 +5,7 @@
 use anyhow::Result;
 use candle_core::{Device, Tensor, Var};
 use fairgrasp_env::spaces::ImageView;
+use fairgrasp_rl::kernels::product::ProductKernel;
 use fairgrasp_rl::policies::cnn::{CnnArch, CnnCache, CnnEncoder};
 use rand::{Rng, SeedableRng};
 use std::time::Instant;
@@ -45,7 +46,11 @@ pub fn run(args: &CnnBenchArgs) -> Result<()> {
     let b = args.batch;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     if !args.json {
-        println!("CPU: {}; batch {b}; ms per batch", crate::host::cpu_model());
+        println!(
+            "CPU: {}; batch {b}; ms per batch; product kernel {} (FAIRGRASP_IMAGE_KERNEL)",
+            crate::host::cpu_model(),
+            ProductKernel::current().name()
+        );
     }
     for (name, arch, side, features) in SHAPES {
         let view = ImageView {
@@ -108,6 +113,7 @@ pub fn run(args: &CnnBenchArgs) -> Result<()> {
                 "{}",
                 serde_json::json!({
                     "shape": name, "batch": b, "cpu": crate::host::cpu_model(),
+                    "kernel": ProductKernel::current().name(),
                     "ours_forward_ms": ms(ours_forward), "ours_step_ms": ms(ours_step),
                     "candle_forward_ms": ms(candle_forward), "candle_step_ms": ms(candle_step),
                 })

@@ -104,6 +104,10 @@ fn main() -> std::process::ExitCode {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
+    if let Err(e) = fairgrasp_rl::kernels::product::ProductKernel::from_env() {
+        eprintln!("error: {e}");
+        return std::process::ExitCode::FAILURE;
+    }
     let result = match cli.command {
         Command::Inspect(args) => inspect::run(&args),
         Command::Demo(command) => demo::run(command),

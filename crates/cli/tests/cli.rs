@@ -49,6 +49,28 @@ fn inspect_prints_joint_table_chain_and_flange_pose_of_the_bundled_fr5() {
 }
 
 #[test]
+fn an_unknown_image_kernel_is_refused_by_name() {
+    let urdf = repo().join("assets/robots/fr5/urdf/fr5.urdf");
+    let out = Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
+        .args(["inspect", urdf.to_str().unwrap()])
+        .env("FAIRGRASP_IMAGE_KERNEL", "avx9")
+        .output()
+        .expect("run fairgrasp");
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("FAIRGRASP_IMAGE_KERNEL=avx9") && stderr.contains("expected avx2 or gemm"),
+        "{stderr}"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
+        .args(["inspect", urdf.to_str().unwrap()])
+        .env("FAIRGRASP_IMAGE_KERNEL", "gemm")
+        .output()
+        .expect("run fairgrasp");
+    assert!(out.status.success(), "{}", text(&out).1);
+}
+
+#[test]
 fn inspect_resolves_package_meshes_from_a_flag() {
     let data = repo().join("crates/sim/tests/data/mesh_robot");
     let urdf = data.join("mesh_robot_description/urdf/arm.urdf");

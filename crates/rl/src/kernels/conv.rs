@@ -1,16 +1,24 @@
-//! 2-D convolutions over channel-last (NHWC) images, forward and backward, as im2col and one
-//! matrix product each: the image encoders of pixel policies.
+//! 2-D convolutions over channel-last (NHWC) images, forward and backward, as matrix products
+//! over the column matrix (one row per output pixel: the patch under it): the image encoders
+//! of pixel policies.
 //!
-//! Layout: an image batch is `batch × height × width × channels` (what the cameras give, so
-//! the `u8` images go into the first layer without a float copy of their own); a filter bank is
-//! `filters × kernel × kernel × channels`, so that one row of the column matrix (the patch under
-//! one output pixel) meets one filter row, and the output comes out channel-last again.
+//! Layout: an image batch is `batch × height × width × channels` (what the cameras give); a
+//! filter bank is `filters × kernel × kernel × channels`, so that one row of the column matrix
+//! meets one filter row, and the output comes out channel-last again.
+//!
+//! Two ways, by the product kernel ([`ProductKernel`]): gemm's writes the column matrix out
+//! (im2col) and multiplies it; the AVX2 kernel reads the patches in place through an index
+//! table (an implicit GEMM) and adds the input's gradient straight into the image (col2im in
+//! the product), so that NatureCNN's first layer never writes its 20 MB column matrix.
 //!
 //! Why by hand: candle's CPU backward of `conv2d` computes the input's gradient with a direct
 //! `conv_transpose2d` loop even for the first layer, whose input is data; on NatureCNN's shapes
 //! the written-out pass is the measured figure in docs/benchmarks.md ("CNN step").
 
-use crate::kernels::dense::{linear_backward, linear_forward};
+use crate::kernels::dense::{add_bias, bias_grad, linear_backward, linear_forward};
+use crate::kernels::product::{
+    Gathered, IndexTable, ProductKernel, gathered_times, times_gathered, times_scatter_add,
+};
 
 /// One convolution layer's geometry (valid padding, square kernel and stride).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,6 +71,136 @@ impl ConvShape {
     /// Values of the filter bank.
     pub fn weight_len(&self) -> usize {
         self.filters * self.patch()
+    }
+}
+
+/// A layer's buffers, kept between its forward and backward passes and from batch to batch:
+/// the column matrix (gemm's way) or the table that reads the patches in place (the AVX2
+/// kernel's).
+#[derive(Default)]
+pub struct ConvScratch {
+    cols: Vec<f32>,
+    d_cols: Vec<f32>,
+    table: Option<(ConvShape, usize, IndexTable)>,
+}
+
+impl ConvScratch {
+    /// The patch table of `batch` images of `shape`, made once.
+    fn table(&mut self, shape: &ConvShape, batch: usize) -> &IndexTable {
+        if !matches!(&self.table, Some((s, b, _)) if s == shape && *b == batch) {
+            self.table = Some((*shape, batch, patch_table(shape, batch)));
+        }
+        &self.table.as_ref().expect("made above").2
+    }
+}
+
+/// The column matrix of `batch` images as an index table into the images: row `r` (image `b`,
+/// output pixel `(y, x)`) starts at the patch's corner, column `(ky, kx, c)` lies `ky` input
+/// rows and `kx · channels + c` values on; each kernel row is one stretch.
+pub fn patch_table(shape: &ConvShape, batch: usize) -> IndexTable {
+    let (oh, ow) = (shape.out_height(), shape.out_width());
+    let (k, s, c) = (shape.kernel, shape.stride, shape.channels);
+    let row_len = shape.width * c;
+    let mut row_start = Vec::with_capacity(batch * oh * ow);
+    for b in 0..batch {
+        for y in 0..oh {
+            for x in 0..ow {
+                row_start.push(b * shape.in_len() + y * s * row_len + x * s * c);
+            }
+        }
+    }
+    let span = k * c;
+    let col_offset = (0..shape.patch())
+        .map(|q| (q / span) * row_len + q % span)
+        .collect();
+    IndexTable::new(row_start, col_offset, span).expect("a patch's kernel rows are stretches")
+}
+
+/// The layer on `kernel`'s products: `out (batch · out_pixels × filters) = patches(input) ·
+/// weightᵀ + bias`, channel-last.
+#[allow(clippy::too_many_arguments)]
+pub fn layer_forward(
+    kernel: ProductKernel,
+    shape: &ConvShape,
+    input: &[f32],
+    batch: usize,
+    weight: &[f32],
+    bias: &[f32],
+    out: &mut [f32],
+    scratch: &mut ConvScratch,
+) {
+    let (patch, filters) = (shape.patch(), shape.filters);
+    let out = &mut out[..batch * shape.out_len()];
+    if kernel == ProductKernel::Avx2 {
+        let table = scratch.table(shape, batch);
+        let patches = Gathered {
+            values: &input[..batch * shape.in_len()],
+            table,
+        };
+        gathered_times(out, patches, weight, (1, patch), filters);
+        add_bias(out, &bias[..filters]);
+    } else {
+        im2col(shape, input, batch, |v| v, &mut scratch.cols);
+        forward(shape, &scratch.cols, weight, bias, out);
+    }
+}
+
+/// The layer's gradients from its output's (`d_out`): `d_weight` and `d_bias` overwritten,
+/// and with `d_input` the input's (overwritten). `input` and `scratch` are the forward pass's.
+#[allow(clippy::too_many_arguments)]
+pub fn layer_backward(
+    kernel: ProductKernel,
+    shape: &ConvShape,
+    input: &[f32],
+    batch: usize,
+    weight: &[f32],
+    d_out: &[f32],
+    d_weight: &mut [f32],
+    d_bias: &mut [f32],
+    d_input: Option<&mut [f32]>,
+    scratch: &mut ConvScratch,
+) {
+    let (patch, filters) = (shape.patch(), shape.filters);
+    let d_out = &d_out[..batch * shape.out_len()];
+    if kernel == ProductKernel::Avx2 {
+        let table = scratch.table(shape, batch);
+        let patches = Gathered {
+            values: &input[..batch * shape.in_len()],
+            table,
+        };
+        times_gathered(d_weight, filters, d_out, (1, filters), patches);
+        bias_grad(d_out, &mut d_bias[..filters]);
+        if let Some(d_input) = d_input {
+            let d_input = &mut d_input[..batch * shape.in_len()];
+            d_input.fill(0.0);
+            times_scatter_add(
+                d_input,
+                table,
+                d_out,
+                (filters, 1),
+                weight,
+                (patch, 1),
+                filters,
+            );
+        }
+    } else {
+        match d_input {
+            None => backward(shape, &scratch.cols, weight, d_out, d_weight, d_bias, None),
+            Some(d_input) => {
+                scratch.d_cols.resize(scratch.cols.len(), 0.0);
+                let d_cols = Some(&mut scratch.d_cols[..]);
+                backward(
+                    shape,
+                    &scratch.cols,
+                    weight,
+                    d_out,
+                    d_weight,
+                    d_bias,
+                    d_cols,
+                );
+                col2im(shape, &scratch.d_cols, batch, d_input);
+            }
+        }
     }
 }
 
@@ -148,11 +286,12 @@ mod tests {
     use super::*;
     use candle_core::{Device, Tensor, Var};
 
-    /// candle's NCHW convolution and its autograd as the reference.
+    /// candle's NCHW convolution and its autograd as the reference, for both product kernels:
+    /// a small odd layer, and one whose kernel rows are 32 values (the AVX2 kernel's
+    /// 16-column tiles then lie in one stretch) with filters that fill no tile.
     #[test]
     fn forward_and_backward_match_candles_convolution() {
-        let dev = Device::Cpu;
-        let shape = ConvShape {
+        let small = ConvShape {
             height: 11,
             width: 9,
             channels: 3,
@@ -160,6 +299,23 @@ mod tests {
             kernel: 3,
             stride: 2,
         };
+        let wide = ConvShape {
+            height: 10,
+            width: 12,
+            channels: 16,
+            filters: 20,
+            kernel: 2,
+            stride: 2,
+        };
+        for shape in [small, wide] {
+            for kernel in [ProductKernel::Gemm, ProductKernel::Avx2] {
+                matches_candle(kernel, shape);
+            }
+        }
+    }
+
+    fn matches_candle(kernel: ProductKernel, shape: ConvShape) {
+        let dev = Device::Cpu;
         let batch = 2;
         let input: Vec<f32> = (0..batch * shape.in_len())
             .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
@@ -167,30 +323,45 @@ mod tests {
         let weight: Vec<f32> = (0..shape.weight_len())
             .map(|i| ((i * 13 % 29) as f32 / 14.0) - 1.0)
             .collect();
-        let bias = [0.1f32, -0.2, 0.3, 0.0];
+        let bias: Vec<f32> = (0..shape.filters).map(|i| 0.1 * i as f32 - 0.2).collect();
         let d_out: Vec<f32> = (0..batch * shape.out_len())
             .map(|i| ((i * 7 % 17) as f32 / 8.0) - 1.0)
             .collect();
 
-        let mut cols = Vec::new();
-        im2col(&shape, &input, batch, |v| v, &mut cols);
+        let mut scratch = ConvScratch::default();
         let mut out = vec![0.0; batch * shape.out_len()];
-        forward(&shape, &cols, &weight, &bias, &mut out);
-        let (mut dw, mut db) = (vec![0.0; shape.weight_len()], vec![0.0; 4]);
-        let mut d_cols = vec![0.0; cols.len()];
-        backward(
+        layer_forward(
+            kernel,
             &shape,
-            &cols,
+            &input,
+            batch,
+            &weight,
+            &bias,
+            &mut out,
+            &mut scratch,
+        );
+        let (mut dw, mut db) = (vec![0.0; shape.weight_len()], vec![0.0; shape.filters]);
+        let mut d_input = vec![f32::NAN; input.len()];
+        layer_backward(
+            kernel,
+            &shape,
+            &input,
+            batch,
             &weight,
             &d_out,
             &mut dw,
             &mut db,
-            Some(&mut d_cols),
+            Some(&mut d_input),
+            &mut scratch,
         );
-        let mut d_input = vec![0.0; input.len()];
-        col2im(&shape, &d_cols, batch, &mut d_input);
 
-        let (h, w, c, f, k) = (shape.height, shape.width, 3, 4, 3);
+        let (h, w, c, f, k) = (
+            shape.height,
+            shape.width,
+            shape.channels,
+            shape.filters,
+            shape.kernel,
+        );
         let (oh, ow) = (shape.out_height(), shape.out_width());
         // Channel-last values as a channel-first variable.
         let nchw = |values: &[f32], dims: (usize, usize, usize, usize)| {
@@ -198,11 +369,11 @@ mod tests {
             Var::from_tensor(&t.permute((0, 3, 1, 2)).unwrap().contiguous().unwrap()).unwrap()
         };
         let x = nchw(&input, (batch, h, w, c));
-        let kernel = nchw(&weight, (f, k, k, c));
-        let b = Var::from_tensor(&Tensor::new(&bias, &dev).unwrap()).unwrap();
+        let kernel_var = nchw(&weight, (f, k, k, c));
+        let b = Var::from_tensor(&Tensor::new(bias.as_slice(), &dev).unwrap()).unwrap();
         let y = x
             .as_tensor()
-            .conv2d(kernel.as_tensor(), 0, 2, 1, 1)
+            .conv2d(kernel_var.as_tensor(), 0, shape.stride, 1, 1)
             .unwrap()
             .broadcast_add(&b.as_tensor().reshape((1, f, 1, 1)).unwrap())
             .unwrap();
@@ -229,14 +400,14 @@ mod tests {
             for (i, (x, y)) in a.iter().zip(b).enumerate() {
                 assert!(
                     (x - y).abs() <= 1e-4 * (1.0 + y.abs()),
-                    "{what}[{i}]: {x} vs {y}"
+                    "{kernel:?} {shape:?} {what}[{i}]: {x} vs {y}"
                 );
             }
         };
         close(&out, &nhwc(&y), "output");
         close(
             &dw,
-            &nhwc(grads.get(kernel.as_tensor()).unwrap()),
+            &nhwc(grads.get(kernel_var.as_tensor()).unwrap()),
             "d_weight",
         );
         close(

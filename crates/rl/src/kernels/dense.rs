@@ -2,7 +2,7 @@
 //! layers of the pixel policies' networks ([`crate::policies::pixel_actor`]), whose convolutions
 //! ([`crate::kernels::conv`]) are linear layers over image patches.
 
-use crate::kernels::mlp::matmul;
+use crate::kernels::product::product;
 
 /// `out (rows × out_dim) = x (rows × in_dim) · weightᵀ + bias`, `weight` `out_dim × in_dim`.
 pub fn linear_forward(
@@ -13,7 +13,7 @@ pub fn linear_forward(
     out: &mut [f32],
 ) {
     let rows = x.len() / in_dim;
-    matmul(
+    product(
         (rows, out_dim, in_dim),
         out,
         x,
@@ -21,7 +21,12 @@ pub fn linear_forward(
         weight,
         (1, in_dim),
     );
-    for row in out[..rows * out_dim].chunks_exact_mut(out_dim) {
+    add_bias(&mut out[..rows * out_dim], &bias[..out_dim]);
+}
+
+/// Adds `bias` to each row of `out` (rows of `bias.len()` values).
+pub fn add_bias(out: &mut [f32], bias: &[f32]) {
+    for row in out.chunks_exact_mut(bias.len()) {
         for (o, b) in row.iter_mut().zip(bias) {
             *o += b;
         }
@@ -41,7 +46,7 @@ pub fn linear_backward(
     d_x: Option<&mut [f32]>,
 ) {
     let rows = x.len() / in_dim;
-    matmul(
+    product(
         (out_dim, in_dim, rows),
         d_weight,
         d_out,
@@ -49,14 +54,9 @@ pub fn linear_backward(
         x,
         (in_dim, 1),
     );
-    d_bias[..out_dim].fill(0.0);
-    for row in d_out[..rows * out_dim].chunks_exact(out_dim) {
-        for (d, g) in d_bias.iter_mut().zip(row) {
-            *d += g;
-        }
-    }
+    bias_grad(&d_out[..rows * out_dim], &mut d_bias[..out_dim]);
     if let Some(d_x) = d_x {
-        matmul(
+        product(
             (rows, in_dim, out_dim),
             d_x,
             d_out,
@@ -64,6 +64,16 @@ pub fn linear_backward(
             weight,
             (in_dim, 1),
         );
+    }
+}
+
+/// The bias's gradient (overwritten): the column sums of `d_out` (rows of `d_bias.len()`).
+pub fn bias_grad(d_out: &[f32], d_bias: &mut [f32]) {
+    d_bias.fill(0.0);
+    for row in d_out.chunks_exact(d_bias.len()) {
+        for (d, g) in d_bias.iter_mut().zip(row) {
+            *d += g;
+        }
     }
 }
 

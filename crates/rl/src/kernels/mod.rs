@@ -9,6 +9,8 @@
 //!   loss written out in [`crate::ppo::fused_loss`]);
 //! - [`conv`] and [`dense`]: convolutions (im2col), linear layers and ReLU, forward and
 //!   backward, for the pixel policies' image encoders;
+//! - [`product`]: the image layers' matrix products (an AVX2 kernel of our own where the CPU
+//!   lacks AVX-512);
 //! - [`storage`]: a tensor's values read in place.
 //!
 //! Why by hand: at these networks' sizes candle's per-op allocation and bookkeeping cost more
@@ -18,5 +20,6 @@ pub mod candle_ops;
 pub mod conv;
 pub mod dense;
 pub mod mlp;
+pub mod product;
 pub mod storage;
 pub mod tanh;

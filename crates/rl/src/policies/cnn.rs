@@ -3,8 +3,9 @@
 //! the environment gives them). Forward and backward run on the written-out kernels
 //! ([`crate::kernels::conv`]).
 
-use crate::kernels::conv::{self, ConvShape};
+use crate::kernels::conv::{self, ConvScratch, ConvShape};
 use crate::kernels::dense::{linear_backward, linear_forward, relu, relu_backward};
+use crate::kernels::product::ProductKernel;
 use fairgrasp_env::spaces::ImageView;
 use serde::{Deserialize, Serialize};
 
@@ -51,10 +52,11 @@ pub struct CnnEncoder {
 /// The activations of one batch, kept for the backward pass.
 #[derive(Default)]
 pub struct CnnCache {
-    cols: Vec<Vec<f32>>,
+    /// The images as values in [0, 1].
+    pixels: Vec<f32>,
+    scratch: Vec<ConvScratch>,
     outs: Vec<Vec<f32>>,
     features: Vec<f32>,
-    d_cols: Vec<f32>,
     d_in: Vec<f32>,
     d_flat: Vec<f32>,
     batch: usize,
@@ -150,24 +152,23 @@ impl CnnEncoder {
     /// [`Self::param_shapes`] order.
     pub fn forward(&self, params: &[&[f32]], images: &[u8], batch: usize, cache: &mut CnnCache) {
         let n = self.convs.len();
-        cache.cols.resize_with(n, Vec::new);
+        cache.scratch.resize_with(n, ConvScratch::default);
         cache.outs.resize_with(n, Vec::new);
         cache.batch = batch;
+        cache.pixels.clear();
+        let images = &images[..batch * self.image_len()];
+        cache
+            .pixels
+            .extend(images.iter().map(|&v| v as f32 / 255.0));
+        let kernel = ProductKernel::current();
         for (l, shape) in self.convs.iter().enumerate() {
-            if l == 0 {
-                conv::im2col(
-                    shape,
-                    images,
-                    batch,
-                    |v| v as f32 / 255.0,
-                    &mut cache.cols[0],
-                );
-            } else {
-                conv::im2col(shape, &cache.outs[l - 1], batch, |v| v, &mut cache.cols[l]);
-            }
-            let out = &mut cache.outs[l];
+            let (before, rest) = cache.outs.split_at_mut(l);
+            let input = before.last().unwrap_or(&cache.pixels);
+            let out = &mut rest[0];
             out.resize(batch * shape.out_len(), 0.0);
-            conv::forward(shape, &cache.cols[l], params[2 * l], params[2 * l + 1], out);
+            let (w, b) = (params[2 * l], params[2 * l + 1]);
+            let scratch = &mut cache.scratch[l];
+            conv::layer_forward(kernel, shape, input, batch, w, b, out, scratch);
             relu(out);
         }
         cache.features.resize(batch * self.features, 0.0);
@@ -202,19 +203,26 @@ impl CnnEncoder {
             Some(&mut cache.d_flat),
         );
         let mut d_out = std::mem::take(&mut cache.d_flat);
+        let kernel = ProductKernel::current();
         for (l, shape) in self.convs.iter().enumerate().rev() {
             relu_backward(&cache.outs[l], &mut d_out);
             let (dw, db) = two(grads, 2 * l);
-            if l == 0 {
-                conv::backward(shape, &cache.cols[0], params[0], &d_out, dw, db, None);
-                break;
+            let input = if l == 0 {
+                &cache.pixels
+            } else {
+                &cache.outs[l - 1]
+            };
+            let d_input = (l > 0).then(|| {
+                cache.d_in.resize(batch * shape.in_len(), 0.0);
+                &mut cache.d_in[..]
+            });
+            let (w, scratch) = (params[2 * l], &mut cache.scratch[l]);
+            conv::layer_backward(
+                kernel, shape, input, batch, w, &d_out, dw, db, d_input, scratch,
+            );
+            if l > 0 {
+                std::mem::swap(&mut d_out, &mut cache.d_in);
             }
-            cache.d_cols.resize(cache.cols[l].len(), 0.0);
-            let (w, cols) = (params[2 * l], &cache.cols[l]);
-            conv::backward(shape, cols, w, &d_out, dw, db, Some(&mut cache.d_cols));
-            cache.d_in.resize(batch * shape.in_len(), 0.0);
-            conv::col2im(shape, &cache.d_cols, batch, &mut cache.d_in);
-            std::mem::swap(&mut d_out, &mut cache.d_in);
         }
         cache.d_flat = d_out;
     }
