@@ -472,6 +472,11 @@ mod avx2 {
                             for ic in (0..m).step_by(MR) {
                                 let mr = MR.min(m - ic);
                                 let rows = tile_rows(&a, &mut bufs.rows, ic, mr, pc, kc);
+                                if let Lhs::Gathered(g) = a {
+                                    for i in (ic + MR..m).take(MR) {
+                                        prefetch(g, i, pc, kc);
+                                    }
+                                }
                                 for jr in (0..nc).step_by(NR) {
                                     let panel = bufs.b.as_ptr().add(jr * kc);
                                     let spot = at(ic, jr, mr, NR.min(nc - jr));
@@ -520,8 +525,10 @@ mod avx2 {
         let start = t.row_start[i];
         let mut q = q0;
         let end = q0 + out.len();
+        let mut left_in_stretch = t.run - q0 % t.run;
         while q < end {
-            let stretch = ((q / t.run + 1) * t.run).min(end) - q;
+            let stretch = left_in_stretch.min(end - q);
+            left_in_stretch = t.run;
             let from = start + t.col_offset[q];
             // SAFETY: within the values (the caller's promise); `out` is a distinct buffer.
             unsafe {
@@ -532,6 +539,26 @@ mod avx2 {
                 )
             };
             q += stretch;
+        }
+    }
+
+    /// Asks the cache for row `i`'s values `q0..q0 + len` of a gathered matrix, to be read
+    /// soon: its stretches lie apart in the buffer, where the hardware's prefetcher does not
+    /// follow.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    fn prefetch(g: &Gathered, i: usize, q0: usize, len: usize) {
+        let t = g.table;
+        let start = t.row_start[i];
+        let mut q = q0 - q0 % t.run;
+        while q < q0 + len {
+            let from = start + t.col_offset[q];
+            for line in (0..t.run.min(q0 + len - q)).step_by(16) {
+                if let Some(v) = g.values.get(from + line) {
+                    _mm_prefetch::<_MM_HINT_T0>((v as *const f32).cast());
+                }
+            }
+            q += t.run;
         }
     }
 
@@ -760,6 +787,9 @@ mod avx2 {
                 }
                 Rhs::Gathered(g) => {
                     for p in 0..kc {
+                        if pc + p + 8 < g.table.rows() {
+                            prefetch(g, pc + p + 8, jc, nc);
+                        }
                         gather(g, pc + p, jc, &mut row[..nc]);
                         spread(packed, kc, p, nc, row.as_ptr());
                     }
