@@ -4,7 +4,7 @@
 //!
 //! Why by hand: on an AVX2-only CPU the NatureCNN encoder's step (eleven products, 3 GFLOP a
 //! batch of 64) is where the camera policy's training spends its time, and gemm's AVX2 kernel
-//! ran these shapes at 31–79 GFLOP/s against the FMA units' 96–100 (AMD EPYC, Zen 3), slowest
+//! ran these shapes at 31–83 GFLOP/s against the FMA units' 87–100 (AMD EPYC, Zen 3), slowest
 //! on the first layer, whose 20 MB column matrix im2col writes and both its products read back.
 //! No crate multiplies through index tables. Here:
 //! - a 6 × 16 tile of the result stays in twelve registers, `b` is packed into panels of 16
@@ -13,8 +13,8 @@
 //! - an operand can be read through an [`IndexTable`] (a convolution's patches, in place in
 //!   the image: an implicit GEMM) and a result added through one (col2im inside the product).
 //!
-//! On NatureCNN's step this ran at 0.87 of gemm's AVX2 time (docs/benchmarks.md, "Without
-//! AVX-512"). Where the CPU has AVX-512, gemm's AVX-512 kernel runs (on the Intel Xeon it ran
+//! NatureCNN's step took 0.89 of gemm's AVX2 time (`fairgrasp bench cnn`, 5 alternated
+//! pairs; docs/benchmarks.md, "Without AVX-512"). Where the CPU has AVX-512, gemm's AVX-512 kernel runs (on the Intel Xeon it ran
 //! these products at ~71 GFLOP/s, above the 69–70 any AVX2 kernel can reach there). The sums
 //! run in the same order whatever the AVX2 host, so one seed trains one camera policy on all.
 
@@ -39,12 +39,14 @@ impl ProductKernel {
         *KERNEL.get_or_init(|| Self::from_env().unwrap_or_else(|_| Self::choose(None)))
     }
 
-    /// The kernel `FAIRGRASP_IMAGE_KERNEL` asks for on this CPU, or an error that names a value
-    /// other than `avx2` or `gemm`, or `avx2` on a CPU without AVX2 and FMA.
+    /// The kernel `FAIRGRASP_IMAGE_KERNEL` asks for on this CPU (unset or empty: the CPU's
+    /// choice), or an error that names a value other than `avx2` or `gemm`, or `avx2` on a CPU
+    /// without AVX2 and FMA.
     pub fn from_env() -> Result<Self, String> {
         let value = std::env::var("FAIRGRASP_IMAGE_KERNEL").ok();
         match value.as_deref() {
-            None | Some("gemm") => Ok(Self::choose(value.as_deref())),
+            None | Some("") => Ok(Self::choose(None)),
+            Some("gemm") => Ok(Self::Gemm),
             Some("avx2") if avx2::available() => Ok(Self::Avx2),
             Some("avx2") => Err("FAIRGRASP_IMAGE_KERNEL=avx2: this CPU lacks AVX2 and FMA".into()),
             Some(other) => Err(format!(
