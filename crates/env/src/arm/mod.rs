@@ -445,6 +445,22 @@ impl<T: Task> ArmEnv<T> {
         obs
     }
 
+    /// A new estimator for the object now active and its first estimate, from `state` as the
+    /// arm reports it (`reported`, where the readings differ from the truth).
+    fn start_estimator(
+        &mut self,
+        state: &ArmState,
+        reported: Option<&ArmState>,
+        speed_scale: f32,
+    ) -> (StateEstimator, ArmState) {
+        self.facts.object = state.objects[0].clone();
+        let mut estimator = StateEstimator::new();
+        let view = reported.unwrap_or(state);
+        let pose = state.objects[0].pose;
+        let observed = self.estimate(&mut estimator, view, &pose, false, 0.0, speed_scale);
+        (estimator, observed)
+    }
+
     /// The state the policy sees with `[readings]`: the reported state read as a controller
     /// reports it (speeds in the policy's time at `speed_scale`), the object's pose from a feed
     /// of the configured rate (drawn age), through the estimator. `before` is object 0's true
@@ -652,12 +668,8 @@ impl<T: Task> Env for ArmEnv<T> {
         let reported = reported(&self.mapper, &state, &joint_offset);
         let (mut estimator, mut observed) = (None, None);
         if self.config.readings.enabled {
-            self.facts.object = state.objects[0].clone();
-            let mut e = StateEstimator::new();
-            let view = reported.as_ref().unwrap_or(&state);
-            let pose = state.objects[0].pose;
-            observed = Some(self.estimate(&mut e, view, &pose, false, 0.0, speed_scale));
-            estimator = Some(e);
+            let (e, o) = self.start_estimator(&state, reported.as_ref(), speed_scale);
+            (estimator, observed) = (Some(e), Some(o));
         }
         let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
         let mut targets = self.scene.arm_targets();
@@ -848,11 +860,8 @@ impl<T: Task> Env for ArmEnv<T> {
             let episode = self.episode.as_ref().expect("checked");
             reported = self::reported(&self.mapper, &state, &episode.joint_offset);
             if let Some(e) = estimator.as_mut() {
-                *e = StateEstimator::new();
-                self.facts.object = state.objects[0].clone();
-                let view = reported.as_ref().unwrap_or(&state);
-                let pose = state.objects[0].pose;
-                observed = Some(self.estimate(e, view, &pose, false, 0.0, speed_scale));
+                let (fresh, o) = self.start_estimator(&state, reported.as_ref(), speed_scale);
+                (*e, observed) = (fresh, Some(o));
             }
             let view = (observed.as_ref()).or(reported.as_ref()).unwrap_or(&state);
             let mut targets = self.scene.arm_targets();
