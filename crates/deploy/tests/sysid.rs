@@ -261,7 +261,9 @@ fn without_injected_drives_nothing_extra_is_found() {
         "joint 2 with no drives injected: {:.2} ms / {:.2} ms, rms {:.4} deg",
         j.delay_ms, j.tau_ms, j.rms_residual_deg
     );
-    assert!(j.delay_ms < 2.0 && j.tau_ms < 2.0, "{j:?}");
+    // The live twin's clock is the host's: on a loaded 2-core host its alignment alone read
+    // 2.05 ms. The smallest drive the other tests inject is 10 ms.
+    assert!(j.delay_ms < 4.0 && j.tau_ms < 4.0, "{j:?}");
     assert!(model.gripper.is_none());
 }
 
