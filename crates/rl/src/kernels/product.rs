@@ -125,21 +125,11 @@ pub fn product_with(
         matmul((m, n, k), dst, lhs, (lrs, lcs), rhs, (rrs, rcs));
         return;
     }
-    let (a, b) = (
-        avx2::View::new(lhs, lrs, lcs),
-        avx2::View::new(rhs, rrs, rcs),
+    let (lhs, rhs) = (
+        Operand::Matrix(lhs, (lrs, lcs)),
+        Operand::Matrix(rhs, (rrs, rcs)),
     );
-    // SAFETY: AVX2 and FMA are available (checked above); the asserts keep every access in
-    // bounds.
-    unsafe {
-        run_avx2(
-            (m, n, k),
-            avx2::Lhs::Matrix(a),
-            avx2::Rhs::Matrix(b),
-            dst.as_mut_ptr(),
-            None,
-        )
-    };
+    avx2_product((m, n, k), lhs, rhs, dst, None);
 }
 
 /// Index tables that read a matrix out of a buffer without copying it: value (i, j) lies at
@@ -217,31 +207,12 @@ pub fn gathered_times(
     dst: &mut [f32],
     lhs: Gathered,
     rhs: &[f32],
-    (rrs, rcs): (usize, usize),
+    rhs_strides: (usize, usize),
     n: usize,
 ) {
     let (m, k) = (lhs.table.rows(), lhs.table.cols());
-    assert!(
-        lhs.values.len() >= lhs.table.reach(),
-        "product: gathered lhs too short"
-    );
-    assert!(dst.len() >= m * n, "product: dst too short");
-    assert!(rhs.len() >= reach(rrs, rcs, k, n), "product: rhs too short");
-    assert!(
-        avx2::available(),
-        "product: the AVX2 kernel needs AVX2 and FMA"
-    );
-    let b = avx2::View::new(rhs, rrs, rcs);
-    // SAFETY: AVX2 and FMA are available; the asserts keep every access in bounds.
-    unsafe {
-        run_avx2(
-            (m, n, k),
-            avx2::Lhs::Gathered(&lhs),
-            avx2::Rhs::Matrix(b),
-            dst.as_mut_ptr(),
-            None,
-        )
-    };
+    let rhs = Operand::Matrix(rhs, rhs_strides);
+    avx2_product((m, n, k), Operand::Gathered(lhs), rhs, dst, None);
 }
 
 /// `dst (m × n, row-major) = lhs (m × k, by strides) · rhs (gathered, k × n)` on the AVX2
@@ -250,31 +221,12 @@ pub fn times_gathered(
     dst: &mut [f32],
     m: usize,
     lhs: &[f32],
-    (lrs, lcs): (usize, usize),
+    lhs_strides: (usize, usize),
     rhs: Gathered,
 ) {
     let (k, n) = (rhs.table.rows(), rhs.table.cols());
-    assert!(
-        rhs.values.len() >= rhs.table.reach(),
-        "product: gathered rhs too short"
-    );
-    assert!(dst.len() >= m * n, "product: dst too short");
-    assert!(lhs.len() >= reach(lrs, lcs, m, k), "product: lhs too short");
-    assert!(
-        avx2::available(),
-        "product: the AVX2 kernel needs AVX2 and FMA"
-    );
-    let a = avx2::View::new(lhs, lrs, lcs);
-    // SAFETY: AVX2 and FMA are available; the asserts keep every access in bounds.
-    unsafe {
-        run_avx2(
-            (m, n, k),
-            avx2::Lhs::Matrix(a),
-            avx2::Rhs::Gathered(&rhs),
-            dst.as_mut_ptr(),
-            None,
-        )
-    };
+    let lhs = Operand::Matrix(lhs, lhs_strides);
+    avx2_product((m, n, k), lhs, Operand::Gathered(rhs), dst, None);
 }
 
 /// `dst[table] += lhs (m × k) · rhs (k × n)`: value (i, j) of the product added at
@@ -284,36 +236,84 @@ pub fn times_scatter_add(
     dst: &mut [f32],
     table: &IndexTable,
     lhs: &[f32],
-    (lrs, lcs): (usize, usize),
+    lhs_strides: (usize, usize),
     rhs: &[f32],
-    (rrs, rcs): (usize, usize),
+    rhs_strides: (usize, usize),
     k: usize,
 ) {
     let (m, n) = (table.rows(), table.cols());
-    assert!(
-        dst.len() >= table.reach(),
-        "product: scatter target too short"
+    let (lhs, rhs) = (
+        Operand::Matrix(lhs, lhs_strides),
+        Operand::Matrix(rhs, rhs_strides),
     );
-    assert!(lhs.len() >= reach(lrs, lcs, m, k), "product: lhs too short");
-    assert!(rhs.len() >= reach(rrs, rcs, k, n), "product: rhs too short");
+    avx2_product((m, n, k), lhs, rhs, dst, Some(table));
+}
+
+/// An operand of the AVX2 kernel: a matrix by its strides, or read through a table.
+enum Operand<'a> {
+    Matrix(&'a [f32], (usize, usize)),
+    Gathered(Gathered<'a>),
+}
+
+impl Operand<'_> {
+    /// Panics with `what` unless the operand holds `rows × cols` values.
+    fn check(&self, rows: usize, cols: usize, what: &str) {
+        match self {
+            Operand::Matrix(values, (rs, cs)) => {
+                assert!(
+                    values.len() >= reach(*rs, *cs, rows, cols),
+                    "product: {what} too short"
+                )
+            }
+            Operand::Gathered(g) => assert!(
+                g.values.len() >= g.table.reach(),
+                "product: gathered {what} too short"
+            ),
+        }
+    }
+}
+
+/// `dst = lhs · rhs` (m × n, depth k) on the AVX2 kernel, or added through `scatter`, every
+/// access checked first.
+fn avx2_product(
+    (m, n, k): (usize, usize, usize),
+    lhs: Operand,
+    rhs: Operand,
+    dst: &mut [f32],
+    scatter: Option<&IndexTable>,
+) {
     assert!(
         avx2::available(),
         "product: the AVX2 kernel needs AVX2 and FMA"
     );
-    let (a, b) = (
-        avx2::View::new(lhs, lrs, lcs),
-        avx2::View::new(rhs, rrs, rcs),
-    );
-    // SAFETY: AVX2 and FMA are available; the asserts keep every access in bounds.
-    unsafe {
-        run_avx2(
-            (m, n, k),
-            avx2::Lhs::Matrix(a),
-            avx2::Rhs::Matrix(b),
-            dst.as_mut_ptr(),
-            Some(table),
-        )
+    lhs.check(m, k, "lhs");
+    rhs.check(k, n, "rhs");
+    let needed = scatter.map_or(m * n, IndexTable::reach);
+    assert!(dst.len() >= needed, "product: dst too short");
+    let a = match &lhs {
+        Operand::Matrix(values, (rs, cs)) => avx2::Lhs::Matrix(avx2::View::new(values, *rs, *cs)),
+        Operand::Gathered(g) => avx2::Lhs::Gathered(g),
     };
+    let b = match &rhs {
+        Operand::Matrix(values, (rs, cs)) => avx2::Rhs::Matrix(avx2::View::new(values, *rs, *cs)),
+        Operand::Gathered(g) => avx2::Rhs::Gathered(g),
+    };
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if scatter.is_none() {
+            dst[..m * n].fill(0.0);
+        }
+        return;
+    }
+    let ptr = dst.as_mut_ptr();
+    let out = match scatter {
+        Some(table) => avx2::Out::ScatterAdd { ptr, table },
+        None => avx2::Out::Matrix { ptr, rs: n, cs: 1 },
+    };
+    // SAFETY: AVX2 and FMA are available; the checks above keep every access in bounds.
+    unsafe { avx2::run((m, n, k), a, b, out) };
 }
 
 /// The span a strided matrix reaches in its buffer.
@@ -323,39 +323,6 @@ fn reach(rs: usize, cs: usize, rows: usize, cols: usize) -> usize {
     } else {
         (rows - 1) * rs + (cols - 1) * cs + 1
     }
-}
-
-/// The AVX2 kernel: `dst` row-major (m × n), or added through `scatter`.
-///
-/// # Safety
-/// AVX2 and FMA are available; every operand's accesses lie in bounds.
-unsafe fn run_avx2(
-    (m, n, k): (usize, usize, usize),
-    a: avx2::Lhs,
-    b: avx2::Rhs,
-    dst: *mut f32,
-    scatter: Option<&IndexTable>,
-) {
-    if m == 0 || n == 0 {
-        return;
-    }
-    let out = match scatter {
-        Some(table) => avx2::Out::ScatterAdd { ptr: dst, table },
-        None => avx2::Out::Matrix {
-            ptr: dst,
-            rs: n,
-            cs: 1,
-        },
-    };
-    if k == 0 {
-        if scatter.is_none() {
-            // SAFETY: dst holds m × n values.
-            unsafe { std::ptr::write_bytes(dst, 0, m * n) };
-        }
-        return;
-    }
-    // SAFETY: as the caller promises.
-    unsafe { avx2::run((m, n, k), a, b, out) };
 }
 
 #[cfg(target_arch = "x86_64")]
