@@ -273,6 +273,20 @@ impl Operand<'_> {
     }
 }
 
+/// Where the AVX2 kernel's result goes: a row-major matrix (written, or added to after the
+/// first block of the depth), or added through an index table.
+enum Out<'a> {
+    Matrix {
+        ptr: *mut f32,
+        rs: usize,
+        cs: usize,
+    },
+    ScatterAdd {
+        ptr: *mut f32,
+        table: &'a IndexTable,
+    },
+}
+
 /// `dst = lhs · rhs` (m × n, depth k) on the AVX2 kernel, or added through `scatter`, every
 /// access checked first.
 fn avx2_product(
@@ -290,14 +304,6 @@ fn avx2_product(
     rhs.check(k, n, "rhs");
     let needed = scatter.map_or(m * n, IndexTable::reach);
     assert!(dst.len() >= needed, "product: dst too short");
-    let a = match &lhs {
-        Operand::Matrix(values, (rs, cs)) => avx2::Lhs::Matrix(avx2::View::new(values, *rs, *cs)),
-        Operand::Gathered(g) => avx2::Lhs::Gathered(g),
-    };
-    let b = match &rhs {
-        Operand::Matrix(values, (rs, cs)) => avx2::Rhs::Matrix(avx2::View::new(values, *rs, *cs)),
-        Operand::Gathered(g) => avx2::Rhs::Gathered(g),
-    };
     if m == 0 || n == 0 {
         return;
     }
@@ -309,11 +315,11 @@ fn avx2_product(
     }
     let ptr = dst.as_mut_ptr();
     let out = match scatter {
-        Some(table) => avx2::Out::ScatterAdd { ptr, table },
-        None => avx2::Out::Matrix { ptr, rs: n, cs: 1 },
+        Some(table) => Out::ScatterAdd { ptr, table },
+        None => Out::Matrix { ptr, rs: n, cs: 1 },
     };
     // SAFETY: AVX2 and FMA are available; the checks above keep every access in bounds.
-    unsafe { avx2::run((m, n, k), a, b, out) };
+    unsafe { avx2::run((m, n, k), &lhs, &rhs, out) };
 }
 
 /// The span a strided matrix reaches in its buffer.
@@ -327,7 +333,7 @@ fn reach(rs: usize, cs: usize, rows: usize, cols: usize) -> usize {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Gathered, IndexTable};
+    use super::{Gathered, Operand, Out};
     use std::arch::x86_64::*;
     use std::cell::RefCell;
 
@@ -352,14 +358,14 @@ mod avx2 {
 
     /// A read-only matrix by its first value and strides.
     #[derive(Clone, Copy)]
-    pub struct View {
+    struct View {
         ptr: *const f32,
         rs: usize,
         cs: usize,
     }
 
     impl View {
-        pub fn new(values: &[f32], rs: usize, cs: usize) -> Self {
+        fn new(values: &[f32], rs: usize, cs: usize) -> Self {
             Self {
                 ptr: values.as_ptr(),
                 rs,
@@ -368,29 +374,19 @@ mod avx2 {
         }
     }
 
-    /// The left operand.
-    pub enum Lhs<'a> {
+    /// An operand as the kernel reads it.
+    enum Src<'a> {
         Matrix(View),
         Gathered(&'a Gathered<'a>),
     }
 
-    /// The right operand.
-    pub enum Rhs<'a> {
-        Matrix(View),
-        Gathered(&'a Gathered<'a>),
-    }
-
-    /// Where the result goes: a matrix (written), or added through index tables.
-    pub enum Out<'a> {
-        Matrix {
-            ptr: *mut f32,
-            rs: usize,
-            cs: usize,
-        },
-        ScatterAdd {
-            ptr: *mut f32,
-            table: &'a IndexTable,
-        },
+    impl<'a> Src<'a> {
+        fn of(operand: &'a Operand<'a>) -> Self {
+            match operand {
+                Operand::Matrix(values, (rs, cs)) => Src::Matrix(View::new(values, *rs, *cs)),
+                Operand::Gathered(g) => Src::Gathered(g),
+            }
+        }
     }
 
     #[derive(Default)]
@@ -413,11 +409,12 @@ mod avx2 {
     /// The CPU has AVX2 and FMA; `a` (m × k), `b` (k × n) and `out` (m × n) lie within their
     /// buffers (gathered ones: every index the tables give), and `out` overlaps neither.
     #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn run((m, n, k): (usize, usize, usize), a: Lhs, b: Rhs, out: Out) {
+    pub unsafe fn run((m, n, k): (usize, usize, usize), a: &Operand, b: &Operand, out: Out) {
+        let (a, b) = (Src::of(a), Src::of(b));
         BUFFERS.with_borrow_mut(|bufs| {
             let kmax = KC.min(k);
             let narrow =
-                n <= NARROW && matches!(a, Lhs::Gathered(_) | Lhs::Matrix(View { cs: 1, .. }));
+                n <= NARROW && matches!(a, Src::Gathered(_) | Src::Matrix(View { cs: 1, .. }));
             bufs.b.resize(NC.min(n).div_ceil(NR) * NR * kmax, 0.0);
             bufs.rows.resize((MR * KC).max(NC.min(n)), 0.0);
             if !narrow {
@@ -441,7 +438,7 @@ mod avx2 {
                             for ic in (0..m).step_by(MR) {
                                 let mr = MR.min(m - ic);
                                 let rows = tile_rows(&a, &mut bufs.rows, ic, mr, pc, kc);
-                                if let Lhs::Gathered(g) = a {
+                                if let Src::Gathered(g) = a {
                                     for i in (ic + MR..m).take(MR) {
                                         prefetch(g, i, pc, kc);
                                     }
@@ -554,7 +551,7 @@ mod avx2 {
     #[inline]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn tile_rows(
-        a: &Lhs,
+        a: &Src,
         rows: &mut [f32],
         ic: usize,
         mr: usize,
@@ -564,10 +561,10 @@ mod avx2 {
         // SAFETY: as `run`'s.
         unsafe {
             match a {
-                Lhs::Matrix(v) => {
+                Src::Matrix(v) => {
                     std::array::from_fn(|r| v.ptr.add((ic + r.min(mr - 1)) * v.rs + pc))
                 }
-                Lhs::Gathered(g) => {
+                Src::Gathered(g) => {
                     for r in 0..mr {
                         gather(g, ic + r, pc, &mut rows[r * KC..r * KC + kc]);
                     }
@@ -584,7 +581,7 @@ mod avx2 {
         rows: &mut [f32],
         kc: usize,
         mc: usize,
-        a: &Lhs,
+        a: &Src,
         ic: usize,
         pc: usize,
     ) {
@@ -594,7 +591,7 @@ mod avx2 {
             // SAFETY: every read stays within a's m × k values.
             unsafe {
                 let v = match a {
-                    Lhs::Matrix(v) if v.rs == 1 && mr == MR => {
+                    Src::Matrix(v) if v.rs == 1 && mr == MR => {
                         // Columns contiguous: a step's six values in one masked load.
                         let six = _mm256_setr_epi32(-1, -1, -1, -1, -1, -1, 0, 0);
                         let src = v.ptr.add((ic + ir) + pc * v.cs);
@@ -604,7 +601,7 @@ mod avx2 {
                         }
                         continue;
                     }
-                    Lhs::Matrix(v) if v.cs != 1 || mr < MR => {
+                    Src::Matrix(v) if v.cs != 1 || mr < MR => {
                         let src = v.ptr.add((ic + ir) * v.rs + pc * v.cs);
                         for (p, dst) in panel.chunks_exact_mut(MR).take(kc).enumerate() {
                             for (r, d) in dst.iter_mut().enumerate() {
@@ -617,11 +614,11 @@ mod avx2 {
                         }
                         continue;
                     }
-                    Lhs::Matrix(v) => View {
+                    Src::Matrix(v) => View {
                         ptr: v.ptr.add((ic + ir) * v.rs + pc),
                         ..*v
                     },
-                    Lhs::Gathered(g) => {
+                    Src::Gathered(g) => {
                         rows[..MR * KC].fill(0.0);
                         for r in 0..mr {
                             gather(g, ic + ir + r, pc, &mut rows[r * KC..r * KC + kc]);
@@ -700,14 +697,14 @@ mod avx2 {
         row: &mut [f32],
         kc: usize,
         nc: usize,
-        b: &Rhs,
+        b: &Src,
         pc: usize,
         jc: usize,
     ) {
         // SAFETY: every read stays within b's k × n values.
         unsafe {
             match b {
-                Rhs::Matrix(v) if v.rs == 1 && nc.is_multiple_of(NR) => {
+                Src::Matrix(v) if v.rs == 1 && nc.is_multiple_of(NR) => {
                     // Columns contiguous (b transposed): eight steps of eight columns at a
                     // time, transposed in registers.
                     for jr in (0..nc).step_by(NR) {
@@ -732,7 +729,7 @@ mod avx2 {
                         }
                     }
                 }
-                Rhs::Matrix(v) if v.cs != 1 => {
+                Src::Matrix(v) if v.cs != 1 => {
                     // Column by column: reads run along b's columns where b is transposed.
                     for jr in (0..nc).step_by(NR) {
                         let nr = NR.min(nc - jr);
@@ -749,12 +746,12 @@ mod avx2 {
                         }
                     }
                 }
-                Rhs::Matrix(v) => {
+                Src::Matrix(v) => {
                     for p in 0..kc {
                         spread(packed, kc, p, nc, v.ptr.add((pc + p) * v.rs + jc));
                     }
                 }
-                Rhs::Gathered(g) => {
+                Src::Gathered(g) => {
                     for p in 0..kc {
                         if pc + p + 8 < g.table.rows() {
                             prefetch(g, pc + p + 8, jc, nc);
@@ -882,46 +879,15 @@ mod avx2 {
 
 #[cfg(not(target_arch = "x86_64"))]
 mod avx2 {
-    use super::{Gathered, IndexTable};
+    use super::{Operand, Out};
 
     pub fn available() -> bool {
         false
     }
 
-    #[derive(Clone, Copy)]
-    pub struct View;
-
-    impl View {
-        pub fn new(_: &[f32], _: usize, _: usize) -> Self {
-            Self
-        }
-    }
-
-    pub enum Lhs<'a> {
-        Matrix(View),
-        Gathered(&'a Gathered<'a>),
-    }
-
-    pub enum Rhs<'a> {
-        Matrix(View),
-        Gathered(&'a Gathered<'a>),
-    }
-
-    pub enum Out<'a> {
-        Matrix {
-            ptr: *mut f32,
-            rs: usize,
-            cs: usize,
-        },
-        ScatterAdd {
-            ptr: *mut f32,
-            table: &'a IndexTable,
-        },
-    }
-
     /// # Safety
     /// Never called: `available()` is false.
-    pub unsafe fn run(_: (usize, usize, usize), _: Lhs, _: Rhs, _: Out) {
+    pub unsafe fn run(_: (usize, usize, usize), _: &Operand, _: &Operand, _: Out) {
         unreachable!("no AVX2 kernel on this architecture")
     }
 }
