@@ -13,7 +13,7 @@
 pub mod stage;
 
 use crate::error::{Result, RlError};
-use crate::nn::adam::Adam;
+use crate::nn::{Adam, LrSchedule};
 use crate::policies::pixel_actor::{PixelActor, PixelActorConfig, PixelCache};
 use crate::policy::Policy;
 use fairgrasp_env::spaces::ImageView;
@@ -39,8 +39,11 @@ pub struct DistillConfig {
     pub epochs: usize,
     /// States per gradient step.
     pub batch_size: usize,
-    /// Adam's step size.
+    /// Adam's step size (the first round's under a falling schedule).
     pub learning_rate: f64,
+    /// How the step size changes over the rounds: `"linear"` takes round `r` of `rounds` at
+    /// `learning_rate × (1 − r / rounds)`.
+    pub lr_schedule: LrSchedule,
     /// The most labelled states kept (the oldest are dropped first).
     pub max_samples: usize,
     /// Random-shift augmentation (DrQ, Kostrikov et al. 2020): each training image moves by up
@@ -68,6 +71,7 @@ impl Default for DistillConfig {
             epochs: 2,
             batch_size: 128,
             learning_rate: 1e-3,
+            lr_schedule: LrSchedule::Constant,
             max_samples: 150_000,
             shift: 4,
             actor: PixelActorConfig::default(),
@@ -330,6 +334,10 @@ pub fn distill<E: Env>(
         let collect_seconds = started.elapsed().as_secs_f64();
         let started = Instant::now();
         let (forward_before, backward_before) = (cache.forward_seconds, cache.backward_seconds);
+        let progress_remaining = 1.0 - round as f64 / config.rounds as f64;
+        adam.lr = config
+            .lr_schedule
+            .at(config.learning_rate, progress_remaining);
         let mut order: Vec<usize> = (0..data.len()).collect();
         let mut loss = 0.0;
         for _ in 0..config.epochs.max(1) {
@@ -447,6 +455,10 @@ pub(crate) mod tests {
     }
 
     fn run(seed: u64) -> (Vec<RoundReport>, Vec<Vec<f32>>, usize) {
+        run_with(&small(), seed)
+    }
+
+    fn run_with(config: &DistillConfig, seed: u64) -> (Vec<RoundReport>, Vec<Vec<f32>>, usize) {
         let mut venv = envs(ObsMode::RgbState);
         let teacher_dim = venv.privileged_dim() - 1;
         let act_dim = venv.act_dim();
@@ -465,7 +477,7 @@ pub(crate) mod tests {
             &mut teacher,
             teacher_dim,
             &mut venv,
-            &small(),
+            config,
             seed,
             &mut on_round,
         )
@@ -495,6 +507,18 @@ pub(crate) mod tests {
             "same seed, same student"
         );
         assert_ne!(run(4).1, weights);
+    }
+
+    #[test]
+    fn a_linear_schedule_keeps_the_first_rounds_rate_and_lowers_the_later_ones() {
+        let linear = |rounds| DistillConfig {
+            rounds,
+            lr_schedule: LrSchedule::Linear,
+            ..small()
+        };
+        let constant = |rounds| DistillConfig { rounds, ..small() };
+        assert_eq!(run_with(&linear(1), 5).1, run_with(&constant(1), 5).1);
+        assert_ne!(run_with(&linear(3), 5).1, run_with(&constant(3), 5).1);
     }
 
     #[test]

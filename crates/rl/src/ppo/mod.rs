@@ -30,15 +30,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-/// How the learning rate changes over training.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LrSchedule {
-    /// `learning_rate` throughout.
-    Constant,
-    /// Linearly from `learning_rate` to 0 at `total_timesteps`.
-    Linear,
-}
+pub use crate::nn::LrSchedule;
 
 /// PPO hyperparameters. The defaults are the design's settings (SB3's PPO with the values of the
 /// design document), kept as the `seed` preset.
@@ -613,10 +605,7 @@ impl Ppo {
     /// training (for the learning-rate schedule).
     pub fn update(&mut self, progress_remaining: f64) -> Result<UpdateStats> {
         let c = self.config.clone();
-        let lr = match c.lr_schedule {
-            LrSchedule::Constant => c.learning_rate,
-            LrSchedule::Linear => c.learning_rate * progress_remaining.max(0.0),
-        };
+        let lr = c.lr_schedule.at(c.learning_rate, progress_remaining);
         self.optimizer.lr = lr;
         let b = &self.buffer;
         let total = b.len();

@@ -10,7 +10,7 @@
 //! (`net_arch` and `activation` shape the critic). The other way to a camera policy,
 //! distillation from a state teacher, is [`crate::distill`].
 
-use super::{LrSchedule, PpoConfig, PrivilegedState};
+use super::{PpoConfig, PrivilegedState};
 use crate::buffers::RolloutBuffer;
 use crate::distributions::log_prob_term;
 use crate::error::{Result, RlError};
@@ -432,10 +432,7 @@ pub fn train_pixel_ppo<V: VectorEnv>(
         let started = Instant::now();
         let (forward_before, backward_before) = (cache.forward_seconds, cache.backward_seconds);
         let progress_remaining = 1.0 - timesteps as f64 / total_timesteps as f64;
-        let lr = match ppo.lr_schedule {
-            LrSchedule::Constant => ppo.learning_rate,
-            LrSchedule::Linear => ppo.learning_rate * progress_remaining.max(0.0),
-        };
+        let lr = ppo.lr_schedule.at(ppo.learning_rate, progress_remaining);
         (adam.lr, log_std_adam.lr, critic.adam.lr) = (lr, lr, lr);
         let mut order: Vec<usize> = (0..buffer.len()).collect();
         'epochs: for _ in 0..ppo.n_epochs {
