@@ -957,10 +957,12 @@ fn the_camera_config_trains_a_teacher_then_distils_and_evaluates_a_student() {
     let (stdout, stderr) = text(&out);
     assert!(out.status.success(), "{stdout}\n{stderr}");
     let bytes = std::fs::read(&onnx).unwrap();
-    assert!(
-        bytes.windows(9).any(|w| w == b"scene_rgb"),
-        "the image input is named"
-    );
+    for name in [&b"scene_rgb"[..], b"wrist_rgb"] {
+        assert!(
+            bytes.windows(name.len()).any(|w| w == name),
+            "the config's two cameras are named inputs"
+        );
+    }
 
     // A bad [distill] key is named before anything trains.
     let out = fairgrasp(&[
