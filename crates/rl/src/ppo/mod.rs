@@ -30,7 +30,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-pub use crate::nn::LrSchedule;
+use crate::nn::LrSchedule;
 
 /// PPO hyperparameters. The defaults are the design's settings (SB3's PPO with the values of the
 /// design document), kept as the `seed` preset.
