@@ -88,6 +88,17 @@ enum Command {
     View(view::ViewArgs),
 }
 
+#[cfg(unix)]
+fn end_on_broken_pipe() {
+    // SAFETY: called before this process starts any thread; SIG_DFL is a valid disposition.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn end_on_broken_pipe() {}
+
 fn main() -> std::process::ExitCode {
     // candle sizes its matrix-multiply parallelism from RAYON_NUM_THREADS. Our networks are
     // small: on one thread a SAC gradient step is ~2.5x faster than on two, and a PPO run a few
@@ -104,6 +115,15 @@ fn main() -> std::process::ExitCode {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
+    // Commands that only print end quietly when their reader stops early (`fairgrasp bench cnn |
+    // head`), as Unix tools do, instead of panicking in `println!` (Rust ignores SIGPIPE).
+    // Commands that serve or drive keep ignoring it: a closed socket is an error they handle.
+    if matches!(
+        cli.command,
+        Command::Inspect(_) | Command::Bench(_) | Command::Eval(_) | Command::Plot(_)
+    ) {
+        end_on_broken_pipe();
+    }
     if let Err(e) = fairgrasp_rl::kernels::product::ProductKernel::from_env() {
         eprintln!("error: {e}");
         return std::process::ExitCode::FAILURE;

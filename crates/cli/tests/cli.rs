@@ -71,6 +71,27 @@ fn an_unknown_image_kernel_is_refused_by_name() {
 }
 
 #[test]
+fn a_reader_that_stops_early_ends_an_output_command_without_a_panic() {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fairgrasp"))
+        .args(["bench", "cnn", "--batch", "1", "--seconds", "0.2"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run fairgrasp");
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    // The reader is gone; the next lines are written into a closed pipe.
+    assert!(first.starts_with("CPU: "), "{first}");
+    let out = child.wait_with_output().expect("wait for fairgrasp");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
+}
+
+#[test]
 fn inspect_resolves_package_meshes_from_a_flag() {
     let data = repo().join("crates/sim/tests/data/mesh_robot");
     let urdf = data.join("mesh_robot_description/urdf/arm.urdf");
