@@ -21,6 +21,9 @@ mod vec_env;
 #[pymodule]
 #[pyo3(name = "_native")]
 fn fairgrasp_native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // As the CLI does at start: a mistyped kernel choice is refused, not silently replaced.
+    fairgrasp_rl::kernels::product::ProductKernel::from_env()
+        .map_err(errors::ConfigError::new_err)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<env::Env>()?;
     m.add_class::<vec_env::VecEnv>()?;

@@ -4,6 +4,10 @@ from."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -89,3 +93,17 @@ def test_terminal_observations_carry_their_images():
     assert gvenv.observation_space["scene_depth"].shape == (2, 48, 48, 1)
     gobs, _ = gvenv.reset(seed=5)
     assert gvenv.observation_space.contains(gobs)
+
+
+def test_an_unknown_image_kernel_is_refused_at_import_by_name():
+    env = dict(os.environ, FAIRGRASP_IMAGE_KERNEL="avx9")
+    done = subprocess.run(
+        [sys.executable, "-c", "import fairgrasp"], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode != 0
+    assert "FAIRGRASP_IMAGE_KERNEL=avx9" in done.stderr and "expected avx2 or gemm" in done.stderr
+    env["FAIRGRASP_IMAGE_KERNEL"] = "gemm"
+    done = subprocess.run(
+        [sys.executable, "-c", "import fairgrasp"], env=env, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
