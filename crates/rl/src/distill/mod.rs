@@ -53,7 +53,8 @@ pub struct DistillConfig {
     pub actor: PixelActorConfig,
     /// Envs stepped together while collecting.
     pub n_envs: usize,
-    /// Threads stepping them.
+    /// Threads stepping them; with more than one the student's cameras are also encoded side by
+    /// side while it trains (the same weights either way).
     pub threads: usize,
     /// Held-out episodes the student plays alone at the end.
     pub eval_episodes: u32,
@@ -275,6 +276,7 @@ pub fn distill<E: Env>(
         targets: Vec::new(),
     };
     let mut cache = PixelCache::default();
+    cache.parallel_encoders = config.threads > 1;
     envs.reset(Some(seed))?;
     let mut privileged: Vec<f32> = (envs.reset_infos().iter())
         .flat_map(|info| info.privileged[..teacher_dim].iter().copied())
