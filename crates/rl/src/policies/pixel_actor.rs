@@ -331,18 +331,14 @@ impl PixelActor {
                 gathered.extend_from_slice(&obs[range.clone()]);
             }
         }
-        let mut offset = 0;
-        let passes = (self.encoders.iter().zip(&cache.views))
-            .zip(cache.encoders.iter_mut())
-            .map(|((encoder, view), encoder_cache)| {
-                let own = &params[offset..offset + encoder.param_count()];
-                offset += encoder.param_count();
-                (encoder, own, view, encoder_cache)
-            })
+        let passes = (self.encoders.iter().zip(self.per_encoder(params)))
+            .zip(cache.views.iter().zip(cache.encoders.iter_mut()))
+            .map(|((encoder, own), (view, encoder_cache))| (encoder, own, view, encoder_cache))
             .collect();
         for_each_camera(passes, cache.parallel_encoders, |(e, own, view, c)| {
             e.forward(own, view, batch, c)
         });
+        let offset = self.encoder_param_count();
         let layers = self.head.len();
         cache.head.resize_with(layers + 1, Vec::new);
         let input = &mut cache.head[0];
@@ -446,10 +442,26 @@ impl PixelActor {
         Ok(value)
     }
 
+    /// How many parameter tensors the encoders hold (theirs come first in pass order).
+    fn encoder_param_count(&self) -> usize {
+        self.encoders.iter().map(CnnEncoder::param_count).sum()
+    }
+
+    /// `params` cut into each encoder's own, in camera order.
+    fn per_encoder<'a, T>(&self, mut params: &'a [T]) -> Vec<&'a [T]> {
+        (self.encoders.iter())
+            .map(|encoder| {
+                let (own, rest) = params.split_at(encoder.param_count());
+                params = rest;
+                own
+            })
+            .collect()
+    }
+
     /// The gradients into `grads` (pass order) from the actions' gradient in `cache.d_head`.
     fn backward(&self, params: &[&[f32]], cache: &mut PixelCache, grads: &mut [Vec<f32>]) {
         let batch = cache.batch;
-        let offset: usize = self.encoders.iter().map(CnnEncoder::param_count).sum();
+        let offset = self.encoder_param_count();
         for (l, &(inp, out)) in self.head.iter().enumerate().rev() {
             if l + 1 < self.head.len() {
                 relu_backward(&cache.head[l + 1], &mut cache.d_head);
@@ -470,23 +482,21 @@ impl PixelActor {
         // `d_head` now holds the head input's gradient: each camera's features, then the state.
         let features = self.config.features;
         let width = self.head[0].0;
-        let (mut start, mut rest) = (0, grads);
+        let mut rest = grads;
         let mut passes = Vec::with_capacity(self.encoders.len());
-        for (v, (encoder, encoder_cache)) in
-            (self.encoders.iter().zip(cache.encoders.iter_mut())).enumerate()
+        let encoders = self.encoders.iter().zip(self.per_encoder(params));
+        for (v, ((encoder, own), encoder_cache)) in
+            encoders.zip(cache.encoders.iter_mut()).enumerate()
         {
-            let count = encoder.param_count();
             let d_features: Vec<f32> = (0..batch)
                 .flat_map(|b| {
                     let row = b * width + v * features;
                     cache.d_head[row..row + features].iter().copied()
                 })
                 .collect();
-            let (own_grads, after) = std::mem::take(&mut rest).split_at_mut(count);
+            let (own_grads, after) = std::mem::take(&mut rest).split_at_mut(encoder.param_count());
             rest = after;
-            let own = &params[start..start + count];
             passes.push((encoder, own, encoder_cache, d_features, own_grads));
-            start += count;
         }
         for_each_camera(passes, cache.parallel_encoders, |(e, own, c, mut d, g)| {
             e.backward(own, c, &mut d, g)
