@@ -96,14 +96,14 @@ def test_terminal_observations_carry_their_images():
 
 
 def test_an_unknown_image_kernel_is_refused_at_import_by_name():
-    env = dict(os.environ, FAIRGRASP_IMAGE_KERNEL="avx9")
-    done = subprocess.run(
-        [sys.executable, "-c", "import fairgrasp"], env=env, capture_output=True, text=True, timeout=120
-    )
+    def import_with(kernel):
+        env = dict(os.environ, FAIRGRASP_IMAGE_KERNEL=kernel)
+        return subprocess.run(
+            [sys.executable, "-c", "import fairgrasp"], env=env, capture_output=True, text=True, timeout=120
+        )
+
+    done = import_with("avx9")
     assert done.returncode != 0
     assert "FAIRGRASP_IMAGE_KERNEL=avx9" in done.stderr and "expected avx2 or gemm" in done.stderr
-    env["FAIRGRASP_IMAGE_KERNEL"] = "gemm"
-    done = subprocess.run(
-        [sys.executable, "-c", "import fairgrasp"], env=env, capture_output=True, text=True, timeout=120
-    )
+    done = import_with("gemm")
     assert done.returncode == 0, done.stderr
