@@ -74,3 +74,49 @@ def test_the_camera_feed_example_serves_what_fairgrasp_camera_check_reads(fairgr
     print(out)
     frames = int(out.split("scene_rgb: ")[1].split(" frames")[0])
     assert frames >= 20, out
+
+
+def two_camera_model(tmp_path):
+    """A model.json as a student of the scene and wrist cameras has it (all the example reads)."""
+    views = [{"name": n, "height": 24, "width": 24, "channels": 3} for n in ("scene_rgb", "wrist_rgb")]
+    (tmp_path / "model.json").write_text(json.dumps({"pixel_actor": {"images": {"views": views}}}))
+    return tmp_path
+
+
+def test_the_camera_feed_example_serves_each_camera_its_own_frames(tmp_path):
+    import socket
+
+    model = two_camera_model(tmp_path)
+    feed = subprocess.Popen(
+        [sys.executable, str(REPO / "examples" / "camera_feed.py"), "--model", str(model),
+         "--synthetic", "--port", "0", "--seconds", "20"],
+        stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        line = feed.stdout.readline()
+        assert "scene_rgb 24x24x3, wrist_rgb 24x24x3" in line, line
+        port = int(line.split(":")[1])
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as conn:
+            reader = conn.makefile("rb")
+            frames = {}
+            while len(frames) < 2:
+                header = json.loads(reader.readline())
+                frames[header["camera"]] = reader.read(header["height"] * header["width"] * header["channels"])
+    finally:
+        feed.kill()
+        feed.wait()
+        feed.stdout.close()
+    assert set(frames) == {"scene_rgb", "wrist_rgb"}
+    assert all(len(p) == 24 * 24 * 3 for p in frames.values())
+    assert frames["scene_rgb"] != frames["wrist_rgb"], "the wrist view was sent the scene camera's image"
+
+
+def test_the_camera_feed_example_asks_for_the_wrist_camera_a_model_reads(tmp_path):
+    model = two_camera_model(tmp_path)
+    done = subprocess.run(
+        [sys.executable, str(REPO / "examples" / "camera_feed.py"), "--model", str(model), "--port", "0",
+         "--seconds", "1"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert done.returncode != 0
+    assert "--wrist-device" in done.stderr, done.stderr

@@ -16,6 +16,10 @@
 //! eye = [1.05, 0.0, 1.45]
 //! target = [0.45, 0.0, 0.78]
 //! fov_deg = 50.0
+//! [wrist_camera]    # its wrist camera as mounted (TCP frame: z the approach, y the fingers' travel)
+//! offset = [0.08, 0.0, -0.12]
+//! direction = [0.0, 0.0, 1.0]
+//! fov_deg = 70.0
 //! ```
 
 use crate::error::{DeployError, Result};
@@ -68,13 +72,7 @@ impl CameraPose {
                 "eye and target must be finite and apart",
             ));
         }
-        if !(self.fov_deg.is_finite() && (5.0..=170.0).contains(&self.fov_deg)) {
-            return Err(DeployError::config(
-                "calibration camera (fov_deg)",
-                format!("must be 5 to 170 degrees, got {}", self.fov_deg),
-            ));
-        }
-        Ok(())
+        check_fov("calibration camera (fov_deg)", self.fov_deg)
     }
 
     /// The unit viewing direction.
@@ -83,6 +81,54 @@ impl CameraPose {
         let n = d.iter().map(|v| v * v).sum::<f64>().sqrt();
         d.map(|v| v / n)
     }
+}
+
+/// The cell's wrist camera as mounted, in the TCP frame (z along the approach, y the fingers'
+/// travel): compared before a run with the wrist camera the policy learnt with, which looks
+/// along the tool's z.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WristCameraMount {
+    /// The camera's optical centre (m).
+    pub offset: [f64; 3],
+    /// Its optical axis (any length but zero).
+    pub direction: [f64; 3],
+    /// Vertical field of view (deg).
+    pub fov_deg: f64,
+}
+
+impl WristCameraMount {
+    fn validate(&self) -> Result<()> {
+        let finite = self
+            .offset
+            .iter()
+            .chain(&self.direction)
+            .all(|v| v.is_finite());
+        let length = self.direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !(finite && length > 1e-6) {
+            return Err(DeployError::config(
+                "calibration wrist_camera",
+                "offset and direction must be finite, and direction not zero",
+            ));
+        }
+        check_fov("calibration wrist_camera (fov_deg)", self.fov_deg)
+    }
+
+    /// The unit viewing direction.
+    pub fn unit_direction(&self) -> [f64; 3] {
+        let n = self.direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+        self.direction.map(|v| v / n)
+    }
+}
+
+fn check_fov(key: &str, fov_deg: f64) -> Result<()> {
+    if !(fov_deg.is_finite() && (5.0..=170.0).contains(&fov_deg)) {
+        return Err(DeployError::config(
+            key,
+            format!("must be 5 to 170 degrees, got {fov_deg}"),
+        ));
+    }
+    Ok(())
 }
 
 /// The whole arm's mapping.
@@ -98,6 +144,10 @@ pub struct Calibration {
     /// The scene camera's pose, for camera policies (`[camera]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<CameraPose>,
+    /// The wrist camera's mounting, for camera policies that see through one
+    /// (`[wrist_camera]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wrist_camera: Option<WristCameraMount>,
 }
 
 impl Calibration {
@@ -115,6 +165,7 @@ impl Calibration {
                 })
                 .collect(),
             camera: None,
+            wrist_camera: None,
         }
     }
 
@@ -134,6 +185,9 @@ impl Calibration {
         }
         if let Some(camera) = &self.camera {
             camera.validate()?;
+        }
+        if let Some(wrist) = &self.wrist_camera {
+            wrist.validate()?;
         }
         if self.joints.len() != 6 {
             return Err(DeployError::config(
@@ -274,5 +328,33 @@ mod tests {
         assert!(e.contains("FR10") && e.contains("FR5"), "{e}");
         c.robot = "FR5 #1234".into();
         assert!(c.validate().is_ok());
+    }
+
+    /// Both camera tables survive a save and a load; an unknown key in them is refused by name.
+    #[test]
+    fn the_cameras_tables_are_written_and_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("calibration.toml");
+        let mut c = fr5();
+        c.camera = Some(CameraPose {
+            eye: [1.05, 0.0, 1.45],
+            target: [0.45, 0.0, 0.78],
+            fov_deg: 50.0,
+        });
+        c.wrist_camera = Some(WristCameraMount {
+            offset: [0.08, 0.0, -0.12],
+            direction: [0.0, 0.0, 1.0],
+            fov_deg: 70.0,
+        });
+        c.save(&path).unwrap();
+        assert_eq!(Calibration::load(&path).unwrap(), c);
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(
+            &path,
+            text.replace("[wrist_camera]", "[wrist_camera]\ntilt = 3.0"),
+        )
+        .unwrap();
+        let e = Calibration::load(&path).unwrap_err().to_string();
+        assert!(e.contains("tilt"), "{e}");
     }
 }

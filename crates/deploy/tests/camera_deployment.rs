@@ -15,8 +15,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
-/// A camera policy with random weights on the deployment model's task, seeing 32×32 RGB.
-fn camera_model(dir: &Path) {
+/// A camera policy with random weights on the deployment model's task, seeing 32×32 RGB, with
+/// `extra` environment settings.
+fn camera_model(dir: &Path, extra: &[&str]) {
     let teacher = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/deploy_ppo");
     let mut meta = ModelMeta::load(&teacher).unwrap();
     let mut table = env_table(&meta.env).unwrap();
@@ -24,7 +25,10 @@ fn camera_model(dir: &Path) {
         "camera.mode=\"rgb+state\"",
         "camera.width=32",
         "camera.height=32",
-    ] {
+    ]
+    .iter()
+    .chain(extra)
+    {
         fairgrasp_env::config::apply_override(&mut table, item).unwrap();
     }
     let env = fairgrasp_env::registry::make(&meta.env_id, &table).unwrap();
@@ -98,7 +102,7 @@ fn deployment(dir: &Path, settings: SimulatedSettings) -> (Deployment, Simulated
 #[test]
 fn a_camera_policy_acts_on_fresh_frames_and_stops_on_stale_ones() {
     let dir = tempfile::tempdir().unwrap();
-    camera_model(dir.path());
+    camera_model(dir.path(), &[]);
     let settings = SimulatedSettings::default();
     let (period, delay) = (settings.camera_period_ms, settings.camera_delay_ms);
 
@@ -163,7 +167,7 @@ fn a_camera_policy_acts_on_fresh_frames_and_stops_on_stale_ones() {
 fn the_cells_camera_pose_is_checked_against_the_models() {
     use fairgrasp_deploy::calibration::CameraPose;
     let dir = tempfile::tempdir().unwrap();
-    camera_model(dir.path());
+    camera_model(dir.path(), &[]);
     let policy = Policy::load(dir.path()).unwrap();
     let io = ModelIo::for_policy(&policy).unwrap();
     let mut calibration = Calibration::identity(&io.limits_rad);
@@ -204,6 +208,71 @@ fn the_cells_camera_pose_is_checked_against_the_models() {
         ModelIo::for_policy(&state)
             .unwrap()
             .camera_mismatch(&calibration),
+        None
+    );
+}
+
+/// The calibration file's wrist camera mounting against the model's (beside the scene
+/// camera's, which keeps its own check): none given, as trained, and off in offset,
+/// direction and field of view beyond the training's randomisation.
+#[test]
+fn the_cells_wrist_camera_mounting_is_checked_against_the_models() {
+    use fairgrasp_deploy::calibration::WristCameraMount;
+    let dir = tempfile::tempdir().unwrap();
+    camera_model(
+        dir.path(),
+        &["camera.wrist.enabled=true", "camera.randomize.enabled=true"],
+    );
+    let policy = Policy::load(dir.path()).unwrap();
+    let io = ModelIo::for_policy(&policy).unwrap();
+    let mut calibration = Calibration::identity(&io.limits_rad);
+    let why = io.wrist_camera_mismatch(&calibration).unwrap();
+    assert!(why.contains("no [wrist_camera] mounting"), "{why}");
+    let wrist = &io.camera.as_ref().unwrap().wrist;
+    let trained = WristCameraMount {
+        offset: wrist.offset.map(f64::from),
+        direction: [0.0, 0.0, 2.0],
+        fov_deg: wrist.fov_deg as f64,
+    };
+    calibration.wrist_camera = Some(trained.clone());
+    assert_eq!(io.wrist_camera_mismatch(&calibration), None);
+    // Within the training's ±2 cm and 3°: nothing to say.
+    let mut near = trained.clone();
+    near.offset[0] += 0.015;
+    near.direction = [0.0, 0.04, 1.0];
+    calibration.wrist_camera = Some(near);
+    assert_eq!(io.wrist_camera_mismatch(&calibration), None);
+    let mut off = trained.clone();
+    off.offset[2] -= 0.03;
+    off.direction = [0.1, 0.0, 1.0];
+    off.fov_deg += 5.0;
+    calibration.wrist_camera = Some(off);
+    let why = io.wrist_camera_mismatch(&calibration).unwrap();
+    assert!(
+        why.contains("wrist camera")
+            && why.contains("30 mm")
+            && why.contains("looks 5.7°")
+            && why.contains("field of view differs by 5.0°"),
+        "{why}"
+    );
+    // Only the wrist: the scene camera's check speaks of its own pose.
+    assert!(!io.camera_mismatch(&calibration).unwrap().contains("wrist"));
+    let mut bad = calibration.clone();
+    bad.wrist_camera.as_mut().unwrap().direction = [0.0; 3];
+    let err = bad.validate().unwrap_err().to_string();
+    assert!(
+        err.contains("wrist_camera") && err.contains("direction"),
+        "{err}"
+    );
+    bad.wrist_camera.as_mut().unwrap().direction = [0.0, 0.0, 1.0];
+    bad.wrist_camera.as_mut().unwrap().offset[1] = f64::NAN;
+    assert!(bad.validate().is_err());
+    // A model without the wrist camera has nothing to check there.
+    let scene_only = tempfile::tempdir().unwrap();
+    camera_model(scene_only.path(), &[]);
+    let io = ModelIo::for_policy(&Policy::load(scene_only.path()).unwrap()).unwrap();
+    assert_eq!(
+        io.wrist_camera_mismatch(&Calibration::identity(&io.limits_rad)),
         None
     );
 }

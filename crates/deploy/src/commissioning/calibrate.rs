@@ -61,6 +61,7 @@ pub fn calibration_from_readings(
         robot: robot.to_string(),
         joints,
         camera: None,
+        wrist_camera: None,
     };
     calibration.validate()?;
     Ok(calibration)

@@ -245,6 +245,7 @@ impl Deployment {
             self.io.gripper_mismatch(),
             self.observation_mismatch(),
             self.io.camera_mismatch(&self.calibration),
+            self.io.wrist_camera_mismatch(&self.calibration),
         ]
         .into_iter()
         .flatten()

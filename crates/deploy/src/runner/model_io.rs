@@ -254,16 +254,6 @@ impl ModelIo {
                 s.eye, s.target, s.fov_deg
             ));
         };
-        let r = &trained.randomize;
-        let (position, angle, fov) = if r.enabled {
-            (
-                r.position_jitter as f64,
-                r.angle_jitter_deg as f64,
-                r.fov_jitter_deg as f64,
-            )
-        } else {
-            (0.005, 1.0, 1.0)
-        };
         let model = CameraPose {
             eye: s.eye.map(f64::from),
             target: s.target.map(f64::from),
@@ -276,28 +266,41 @@ impl ModelIo {
         let cos = (0..3).map(|i| a[i] * b[i]).sum::<f64>().clamp(-1.0, 1.0);
         let turned = cos.acos().to_degrees();
         let wider = (cell.fov_deg - model.fov_deg).abs();
-        let mut problems = Vec::new();
-        if moved > position {
-            problems.push(format!(
-                "it sits {:.0} mm from the model's camera along an axis (trained within {:.0} mm)",
-                moved * 1000.0,
-                position * 1000.0
-            ));
+        pose_problems(trained, moved, turned, wider).map(|problems| {
+            format!("the cell's camera is not where the model learnt to see from: {problems}")
+        })
+    }
+
+    /// Why the cell's wrist camera (the calibration file's `[wrist_camera]`) will not see as
+    /// the camera policy's did, if it will not: its offset from the TCP, its direction (the
+    /// model's looks along the tool's z) or field of view outside the training's randomisation
+    /// (5 mm, 1° without it), or no mounting given.
+    pub fn wrist_camera_mismatch(&self, calibration: &Calibration) -> Option<String> {
+        let trained = self.camera.as_ref()?;
+        if !trained.wrist.enabled {
+            return None;
         }
-        if turned > angle {
-            problems.push(format!(
-                "it looks {turned:.1}° away from the model's direction (trained within {angle}°)"
+        let w = &trained.wrist;
+        let Some(cell) = &calibration.wrist_camera else {
+            return Some(format!(
+                "the calibration file gives no [wrist_camera] mounting: check that the wrist \
+                 camera sits where the model's did (offset {:?} m in the TCP frame, looking \
+                 along the tool's z, field of view {}°)",
+                w.offset, w.fov_deg
             ));
-        }
-        if wider > fov {
-            problems.push(format!(
-                "its field of view differs by {wider:.1}° (trained within {fov}°)"
-            ));
-        }
-        (!problems.is_empty()).then(|| {
+        };
+        let moved = (0..3)
+            .map(|i| (cell.offset[i] - w.offset[i] as f64).abs())
+            .fold(0.0, f64::max);
+        let turned = cell.unit_direction()[2]
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        let wider = (cell.fov_deg - w.fov_deg as f64).abs();
+        pose_problems(trained, moved, turned, wider).map(|problems| {
             format!(
-                "the cell's camera is not where the model learnt to see from: {}",
-                problems.join("; ")
+                "the cell's wrist camera is not mounted where the model learnt to see from: \
+                 {problems}"
             )
         })
     }
@@ -332,6 +335,42 @@ impl ModelIo {
     pub fn apply(&self, state: &ArmState, action: &[f32], command: &mut Command) -> bool {
         self.env.inner().mapper().apply(state, action, command) != Some(MappingEvent::IkFailed)
     }
+}
+
+/// A mounted camera's distance from the model's (`moved`, m along the worst axis), the angle
+/// between their directions and the difference of their fields of view (degrees), against the
+/// training's camera randomisation (5 mm, 1° and 1° for a model trained without it): the
+/// problems, if any.
+fn pose_problems(trained: &CameraObsConfig, moved: f64, turned: f64, wider: f64) -> Option<String> {
+    let r = &trained.randomize;
+    let (position, angle, fov) = if r.enabled {
+        (
+            r.position_jitter as f64,
+            r.angle_jitter_deg as f64,
+            r.fov_jitter_deg as f64,
+        )
+    } else {
+        (0.005, 1.0, 1.0)
+    };
+    let mut problems = Vec::new();
+    if moved > position {
+        problems.push(format!(
+            "it sits {:.0} mm from the model's camera along an axis (trained within {:.0} mm)",
+            moved * 1000.0,
+            position * 1000.0
+        ));
+    }
+    if turned > angle {
+        problems.push(format!(
+            "it looks {turned:.1}° away from the model's direction (trained within {angle}°)"
+        ));
+    }
+    if wider > fov {
+        problems.push(format!(
+            "its field of view differs by {wider:.1}° (trained within {fov}°)"
+        ));
+    }
+    (!problems.is_empty()).then(|| problems.join("; "))
 }
 
 #[cfg(test)]
