@@ -202,8 +202,8 @@ pub struct Info {
     /// The reward split into its terms by name; they sum to the reward.
     pub reward_terms: NamedValues,
     /// What only the simulator knows, for a critic (asymmetric actor-critic, Pinto et al.
-    /// 2018), never for the policy: [`Env::privileged_dim`] values, none when the environment
-    /// offers no privileged state.
+    /// 2018) or a distillation's teacher, never for the policy: [`Env::privileged_dim`] values,
+    /// none when the environment offers no privileged state.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub privileged: Vec<f32>,
 }

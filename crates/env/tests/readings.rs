@@ -134,3 +134,53 @@ fn the_privileged_state_is_the_true_state_s_observation_and_the_policy_never_rea
         .count();
     assert!(differing > with.len() / 2, "{differing} of {}", with.len());
 }
+
+/// In a pixel mode `info.privileged` is what a state policy of the same settings observes —
+/// through the readings — so that a distillation's teacher trained with them labels the
+/// states it learnt on; `readings.privileged` still asks for the true state.
+#[test]
+fn a_pixel_mode_gives_the_teacher_the_state_policy_s_observation_through_the_readings() {
+    use fairgrasp_env::arm::camera::ObsMode;
+    let settings = |c: &mut GraspConfig| {
+        c.readings.state_age_ms = [0.0, 15.0];
+        c.control.speed_scales = vec![0.25, 1.0];
+    };
+    let mut state_env = env_with(settings);
+    let pixel_env = |privileged: bool| {
+        env_with(|c| {
+            settings(c);
+            c.camera.mode = ObsMode::RgbState;
+            c.camera.width = 16;
+            c.camera.height = 16;
+            c.readings.privileged = privileged;
+        })
+    };
+    let (mut pixel, mut critic) = (pixel_env(false), pixel_env(true));
+    let (mut steps, mut apart_from_truth) = (0, 0);
+    for seed in [3, 4] {
+        let (obs, _) = state_env.reset(Some(seed)).unwrap();
+        let (_, info) = pixel.reset(Some(seed)).unwrap();
+        critic.reset(Some(seed)).unwrap();
+        assert_eq!(info.privileged[..obs.len()], obs[..], "reset {seed}");
+        let mut policy = ScriptedGraspPolicy::new(&state_env);
+        for _ in 0..40 {
+            let action = policy.act(&state_env);
+            let want = state_env.step(&action).unwrap();
+            let got = pixel.step(&action).unwrap();
+            let truth = critic.step(&action).unwrap();
+            let dim = want.obs.len();
+            assert_eq!(got.info.privileged[..dim], want.obs[..], "seed {seed}");
+            assert_eq!(got.info.privileged.len(), dim + 1);
+            steps += 1;
+            apart_from_truth += (truth.info.privileged != got.info.privileged) as usize;
+            if want.terminated || want.truncated {
+                break;
+            }
+        }
+    }
+    // The readings differ from the truth (age, inferred pads, whole percent) most steps.
+    assert!(
+        apart_from_truth > steps / 2,
+        "{apart_from_truth} of {steps}"
+    );
+}

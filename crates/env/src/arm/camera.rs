@@ -2,8 +2,10 @@
 //! readings, drawn after every reset and step by the CPU renderer.
 //!
 //! In a pixel mode the state vector is what the real arm reports (joints, speeds, TCP, gripper,
-//! the previous action), never the object's pose; the task's full observation of the true state
-//! goes to [`crate::core::Info::privileged`] for a critic that sees it (asymmetric actor-critic).
+//! the previous action), never the object's pose; the task's full observation, as a state policy
+//! of the same settings reads it (through `[readings]` when they are on), goes to
+//! [`crate::core::Info::privileged`] for a critic that sees it (asymmetric actor-critic) and for
+//! a distillation's teacher.
 
 use crate::config::check_range;
 use crate::error::{EnvError, Result};

@@ -305,8 +305,8 @@ impl<T: Task> ArmEnv<T> {
         );
     }
 
-    /// Whether [`Info::privileged`] carries the task's observation of the true state:
-    /// `readings.privileged`, or a pixel mode (whose policy never sees the object's pose).
+    /// Whether [`Info::privileged`] is reported: with `readings.privileged`, or in a pixel mode
+    /// (whose policy never sees the object's pose).
     fn reports_privileged(&self) -> bool {
         self.config.readings.privileged || self.config.camera.mode.has_images()
     }
@@ -494,12 +494,26 @@ impl<T: Task> ArmEnv<T> {
         estimator.estimate(&self.facts, &reading, pose, gripper_closing, dt)
     }
 
-    /// [`Info::privileged`] for the true `state` (see [`ReadingsConfig::privileged`]); empty
-    /// when it is off.
-    fn privileged(&self, state: &ArmState, previous_action: &[f32], speed_scale: f32) -> Vec<f32> {
+    /// [`Info::privileged`]: the task's `state`-mode observation and the speed scale. With
+    /// `readings.privileged`, of the true `state` (an asymmetric critic's input); otherwise, in
+    /// a pixel mode, of the state as the arm reports it (`view`: the readings, when on), which
+    /// is what a state policy of these settings observes and a distillation's teacher learnt
+    /// from. Empty when neither.
+    fn privileged(
+        &self,
+        state: &ArmState,
+        view: &ArmState,
+        previous_action: &[f32],
+        speed_scale: f32,
+    ) -> Vec<f32> {
         if !self.reports_privileged() {
             return Vec::new();
         }
+        let state = if self.config.readings.privileged {
+            state
+        } else {
+            view
+        };
         let mut values = Vec::with_capacity(self.task_space.dim() + 1);
         write_observation(
             &self.task,
@@ -679,7 +693,7 @@ impl<T: Task> Env for ArmEnv<T> {
         let command = self.mapper.hold(view, targets);
         let previous_action = vec![0.0; self.action_space.dim()];
         let obs = self.observe(view, &previous_action, speed_scale);
-        let privileged = self.privileged(&state, &previous_action, speed_scale);
+        let privileged = self.privileged(&state, view, &previous_action, speed_scale);
         let no_op = self.no_op_action();
         let ramp = self.config.control.servo.ramp(&self.scene, speed_scale);
         let gripper = (self.config.control.gripper).drive(&self.scene, speed_scale, &mut self.rng);
@@ -877,7 +891,7 @@ impl<T: Task> Env for ArmEnv<T> {
         if obs.iter().any(|v| !v.is_finite()) {
             return Ok(self.non_finite_step());
         }
-        let privileged = self.privileged(&state, &normalised, speed_scale);
+        let privileged = self.privileged(&state, view, &normalised, speed_scale);
         self.capture()?;
         let mut extras = evaluation.flags.named();
         if watch_force {
