@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import subprocess
 import sys
@@ -55,22 +56,29 @@ def test_ray_tune_sweep_smoke_runs_two_trials(tmp_path):
     assert summary["best_config"]["learning_rate"] in (1e-4, 3e-4)
 
 
-def test_the_camera_feed_example_serves_what_fairgrasp_camera_check_reads(fairgrasp_bin, camera_model):
+@contextlib.contextmanager
+def synthetic_feed(model):
+    """The camera feed example serving its test patterns for `model` on a free port: its first
+    line (the views it serves) and the port; stopped on leaving."""
     feed = subprocess.Popen(
-        [sys.executable, str(REPO / "examples" / "camera_feed.py"), "--model", str(camera_model),
+        [sys.executable, str(REPO / "examples" / "camera_feed.py"), "--model", str(model),
          "--synthetic", "--port", "0", "--seconds", "20"],
         stdout=subprocess.PIPE, text=True,
     )
     try:
         line = feed.stdout.readline()
         assert line.startswith("camera feed on 127.0.0.1:"), line
-        port = int(line.split(":")[1])
-        out = run_cli(fairgrasp_bin, "camera-check", "--model", str(camera_model),
-                      "--camera-tcp", f"127.0.0.1:{port}", "--seconds", "1.5").stdout
+        yield line, int(line.split(":")[1])
     finally:
         feed.kill()
         feed.wait()
         feed.stdout.close()
+
+
+def test_the_camera_feed_example_serves_what_fairgrasp_camera_check_reads(fairgrasp_bin, camera_model):
+    with synthetic_feed(camera_model) as (_, port):
+        out = run_cli(fairgrasp_bin, "camera-check", "--model", str(camera_model),
+                      "--camera-tcp", f"127.0.0.1:{port}", "--seconds", "1.5").stdout
     print(out)
     frames = int(out.split("scene_rgb: ")[1].split(" frames")[0])
     assert frames >= 20, out
@@ -86,26 +94,14 @@ def two_camera_model(tmp_path):
 def test_the_camera_feed_example_serves_each_camera_its_own_frames(tmp_path):
     import socket
 
-    model = two_camera_model(tmp_path)
-    feed = subprocess.Popen(
-        [sys.executable, str(REPO / "examples" / "camera_feed.py"), "--model", str(model),
-         "--synthetic", "--port", "0", "--seconds", "20"],
-        stdout=subprocess.PIPE, text=True,
-    )
-    try:
-        line = feed.stdout.readline()
+    with synthetic_feed(two_camera_model(tmp_path)) as (line, port):
         assert "scene_rgb 24x24x3, wrist_rgb 24x24x3" in line, line
-        port = int(line.split(":")[1])
         with socket.create_connection(("127.0.0.1", port), timeout=5) as conn:
             reader = conn.makefile("rb")
             frames = {}
             while len(frames) < 2:
                 header = json.loads(reader.readline())
                 frames[header["camera"]] = reader.read(header["height"] * header["width"] * header["channels"])
-    finally:
-        feed.kill()
-        feed.wait()
-        feed.stdout.close()
     assert set(frames) == {"scene_rgb", "wrist_rgb"}
     assert all(len(p) == 24 * 24 * 3 for p in frames.values())
     assert frames["scene_rgb"] != frames["wrist_rgb"], "the wrist view was sent the scene camera's image"
