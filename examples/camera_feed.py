@@ -160,13 +160,12 @@ def main() -> None:
     period = 1.0 / args.fps
     next_due = started
     while args.seconds is None or time.monotonic() - started < args.seconds:
-        images = {}
-        for camera, source in cameras.items():
-            images[camera] = (next(source), time.monotonic())
-        data = b"".join(
-            frame_bytes(v["name"], resize(images[camera_of(v)][0], v["width"], v["height"]), images[camera_of(v)][1])
-            for v in wanted
-        )
+        images = {camera: (next(source), time.monotonic()) for camera, source in cameras.items()}
+        parts = []
+        for v in wanted:
+            image, stamp = images[camera_of(v)]
+            parts.append(frame_bytes(v["name"], resize(image, v["width"], v["height"]), stamp))
+        data = b"".join(parts)
         feed.send(data)
         next_due += period
         time.sleep(max(0.0, next_due - time.monotonic()))

@@ -62,11 +62,7 @@ pub struct CameraPose {
 impl CameraPose {
     fn validate(&self) -> Result<()> {
         let finite = self.eye.iter().chain(&self.target).all(|v| v.is_finite());
-        let apart = (0..3)
-            .map(|i| (self.target[i] - self.eye[i]).powi(2))
-            .sum::<f64>()
-            > 1e-6;
-        if !(finite && apart) {
+        if !(finite && length(&self.sight()) > 1e-3) {
             return Err(DeployError::config(
                 "calibration camera",
                 "eye and target must be finite and apart",
@@ -77,9 +73,12 @@ impl CameraPose {
 
     /// The unit viewing direction.
     pub fn direction(&self) -> [f64; 3] {
-        let d: [f64; 3] = std::array::from_fn(|i| self.target[i] - self.eye[i]);
-        let n = d.iter().map(|v| v * v).sum::<f64>().sqrt();
-        d.map(|v| v / n)
+        unit(&self.sight())
+    }
+
+    /// From the eye to the target.
+    fn sight(&self) -> [f64; 3] {
+        std::array::from_fn(|i| self.target[i] - self.eye[i])
     }
 }
 
@@ -104,8 +103,7 @@ impl WristCameraMount {
             .iter()
             .chain(&self.direction)
             .all(|v| v.is_finite());
-        let length = self.direction.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if !(finite && length > 1e-6) {
+        if !(finite && length(&self.direction) > 1e-6) {
             return Err(DeployError::config(
                 "calibration wrist_camera",
                 "offset and direction must be finite, and direction not zero",
@@ -116,9 +114,17 @@ impl WristCameraMount {
 
     /// The unit viewing direction.
     pub fn unit_direction(&self) -> [f64; 3] {
-        let n = self.direction.iter().map(|v| v * v).sum::<f64>().sqrt();
-        self.direction.map(|v| v / n)
+        unit(&self.direction)
     }
+}
+
+fn length(v: &[f64; 3]) -> f64 {
+    v.iter().map(|c| c * c).sum::<f64>().sqrt()
+}
+
+fn unit(v: &[f64; 3]) -> [f64; 3] {
+    let n = length(v);
+    v.map(|c| c / n)
 }
 
 fn check_fov(key: &str, fov_deg: f64) -> Result<()> {
