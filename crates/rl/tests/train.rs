@@ -593,7 +593,8 @@ fn weights_sha256(run: &Path) -> String {
 }
 
 /// Which of gemm's matrix-product kernels this host runs (gemm picks at run time): the same
-/// seed trains other weights on each, the products summing in another order.
+/// seed trains other SAC and TD3 weights on each (candle's products sum in each kernel's order;
+/// PPO's MLPs run one kernel of ours on every host with AVX2 and FMA).
 fn gemm_kernel() -> Option<&'static str> {
     #[cfg(target_arch = "x86_64")]
     {
@@ -610,10 +611,12 @@ fn gemm_kernel() -> Option<&'static str> {
 /// Short runs of the shipped configs train the weights pinned here, so that a change meant to
 /// leave behaviour alone (a refactor, a faster kernel) shows when it does not: the same seed
 /// must keep training the same policy for every user. A change that means to move them updates
-/// the hashes and says why in its commit. Pinned per gemm kernel: an AVX-512 host and an
-/// AVX2-only one train different weights from the same seed (the `fma` hashes were taken on an
-/// AVX-512 host with gemm's `x86-v4` feature off, which runs the AVX2 host's kernel). Where
-/// neither kernel runs, two runs of the first config must agree.
+/// the hashes and says why in its commit. PPO's are one hash on every host with AVX2 and FMA
+/// (an AVX-512 build and one with gemm's `x86-v4` feature off trained the same bytes); SAC's
+/// and TD3's are pinned per gemm kernel, an AVX-512 host and an AVX2-only one training
+/// different weights from the same seed (the `fma` hashes were taken on an AVX-512 host with
+/// that feature off, which runs the AVX2 host's kernel). Where neither kernel runs, two runs
+/// of the first config must agree.
 #[test]
 fn short_runs_of_the_shipped_configs_train_pinned_weights() {
     let short = ["threads=1", "checkpoint_freq=1000000", "eval.freq=1000000"];
@@ -629,8 +632,8 @@ fn short_runs_of_the_shipped_configs_train_pinned_weights() {
             builtin("ppo"),
             &["total_timesteps=4096"],
             [
-                "ec0d4a6c1f1316e3f43642a6dd2bbe0b55a076d2524ff032df4558e4220c2463",
-                "a9fda0336ba7c5475726f8b8d4e20f293b5c374a2cc744b8a3a378babbf1ff83",
+                "e7693ccfcc9c085e6a7d111c30e6f1924992060d7db2b379f1f8812e21530524",
+                "e7693ccfcc9c085e6a7d111c30e6f1924992060d7db2b379f1f8812e21530524",
             ],
         ),
         (
@@ -638,8 +641,8 @@ fn short_runs_of_the_shipped_configs_train_pinned_weights() {
             include_str!("../../../configs/ppo_deploy.toml").to_string(),
             &["total_timesteps=4096"],
             [
-                "840793c9fd1fa073e017128e08dd3bc06a2c018cf9ba2127ebd0139209e1b452",
-                "39ed09c06410607599f54c0095dd5b95da3f1e1582f170707dcc622276c7f25f",
+                "1c9027aeec21c4b941b6302b05ba6b347acd617d4c5cbf16ffacc72664860885",
+                "1c9027aeec21c4b941b6302b05ba6b347acd617d4c5cbf16ffacc72664860885",
             ],
         ),
         (

@@ -108,6 +108,30 @@ pub fn product(
     );
 }
 
+/// [`product`] on this module's AVX2 kernel wherever the CPU has AVX2 and FMA, AVX-512 or
+/// not (gemm's kernel elsewhere): the sums run in one order on every such host, so a seed
+/// trains the same weights on an AVX-512 host and an AVX2-only one. The MLPs' products
+/// ([`crate::kernels::mlp`]), whose shapes are small enough that gemm's AVX-512 kernel gained
+/// nothing over this one (docs/benchmarks.md, "Without AVX-512").
+pub fn product_on_every_host(
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    lhs: &[f32],
+    lhs_strides: (usize, usize),
+    rhs: &[f32],
+    rhs_strides: (usize, usize),
+) {
+    product_with(
+        ProductKernel::Avx2,
+        (m, n, k),
+        dst,
+        lhs,
+        lhs_strides,
+        rhs,
+        rhs_strides,
+    );
+}
+
 /// [`product`] with the kernel chosen by the caller (benchmarks and tests).
 pub fn product_with(
     kernel: ProductKernel,
@@ -973,6 +997,60 @@ mod tests {
                     assert_close(&dst, &expected, k, &what);
                 }
             }
+        }
+    }
+
+    /// `lhs · rhs` in the AVX2 kernel's order, with scalar fused multiply-adds that every CPU
+    /// rounds alike: each result a chain from zero over blocks of 256 steps of the depth, the
+    /// blocks' chains added in turn.
+    fn in_the_kernels_order(
+        (m, n, k): (usize, usize, usize),
+        lhs: &[f32],
+        (lrs, lcs): (usize, usize),
+        rhs: &[f32],
+        (rrs, rcs): (usize, usize),
+    ) -> Vec<f32> {
+        let mut out = vec![0.0; m * n];
+        for i in 0..m {
+            for j in 0..n {
+                let mut total = 0.0f32;
+                for start in (0..k).step_by(256) {
+                    let chain = (start..k.min(start + 256)).fold(0.0f32, |acc, p| {
+                        lhs[i * lrs + p * lcs].mul_add(rhs[p * rrs + j * rcs], acc)
+                    });
+                    total = if start == 0 { chain } else { total + chain };
+                }
+                out[i * n + j] = total;
+            }
+        }
+        out
+    }
+
+    /// What makes a seed train the same MLP weights on every host: the products the MLPs run
+    /// sum in one order, whatever the CPU's vector width.
+    #[test]
+    fn the_mlps_products_sum_in_an_order_any_cpu_repeats() {
+        if !avx2::available() {
+            return; // gemm's kernel multiplies here: its order is its own.
+        }
+        // The MLPs' three products (x · Wᵀ, xᵀ · g, g · W) on a batch of 37, 11 inputs and 16
+        // outputs, and shapes that cross the kernel's blocks.
+        let cases = [
+            ((37, 16, 11), (11, 1), (1, 11)),
+            ((11, 16, 37), (1, 11), (16, 1)),
+            ((37, 11, 16), (16, 1), (11, 1)),
+            ((256, 64, 300), (300, 1), (1, 300)),
+            ((64, 64, 600), (1, 64), (64, 1)),
+            ((200, 131, 20), (20, 1), (131, 1)),
+        ];
+        for ((m, n, k), l_strides, r_strides) in cases {
+            let lhs = values(m * k, m + 3);
+            let rhs = values(k * n, n + 5);
+            let mut dst = vec![f32::NAN; m * n];
+            product_on_every_host((m, n, k), &mut dst, &lhs, l_strides, &rhs, r_strides);
+            let want = in_the_kernels_order((m, n, k), &lhs, l_strides, &rhs, r_strides);
+            let differ = dst.iter().zip(&want).filter(|(a, b)| a != b).count();
+            assert_eq!(differ, 0, "{m}×{n}×{k}: {differ} results differ");
         }
     }
 

@@ -288,7 +288,8 @@ impl ActorCritic {
     }
 
     /// [`Self::actions`] with the networks written out: `(actions, means, log σ)`, with
-    /// candle's arithmetic (`μ + ε·e^{log σ}`), so the actions are bit-identical. Acting through
+    /// candle's arithmetic (`μ + ε·e^{log σ}`), so the actions are candle's to rounding (the
+    /// products sum in their own order, the same on every host). Acting through
     /// candle cost 22–34 µs per call for 4 observations, most of it per-operation overhead.
     fn actions_written_out(
         &self,
@@ -456,7 +457,11 @@ mod tests {
                 let out = policy
                     .act_with_critic(&obs, Some(&rows), false, &mut rng)
                     .unwrap();
-                assert_eq!(out.values, policy.values(&rows).unwrap());
+                // `values` runs written out; acting through candle sums in candle's order.
+                let values = policy.values(&rows).unwrap();
+                for (a, b) in out.values.iter().zip(&values) {
+                    assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{a} against {b}");
+                }
                 out
             };
             let (a, b) = (run([0.0, 0.0, 0.0]), run([1.0, -2.0, 0.5]));
@@ -466,7 +471,7 @@ mod tests {
     }
 
     #[test]
-    fn acting_written_out_matches_candle_bit_for_bit() {
+    fn acting_written_out_matches_candle() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut policy = ActorCritic::new(4, 2, 0, &config(), -0.5, &mut rng).unwrap();
         let obs: Vec<f32> = (0..12).map(|i| (i as f32 * 0.37).sin() * 2.0).collect();
@@ -486,6 +491,22 @@ mod tests {
         let ours = [run(&policy, false), run(&policy, true)];
         policy.written_out = false;
         let reference = [run(&policy, false), run(&policy, true)];
-        assert_eq!(ours, reference);
+        let flat = |r: &[_; 2]| -> Vec<f32> {
+            r.iter()
+                .flat_map(
+                    |(a, l, v, p, w): &(Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>)| {
+                        [a, l, v, p, w].into_iter().flatten().copied()
+                    },
+                )
+                .collect()
+        };
+        let (x, y) = (flat(&ours), flat(&reference));
+        assert_eq!(x.len(), y.len());
+        for (i, (a, b)) in x.iter().zip(&y).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
+                "value {i}: {a} against {b}"
+            );
+        }
     }
 }

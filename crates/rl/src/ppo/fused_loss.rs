@@ -10,8 +10,9 @@
 //! (kept as the general path), in the same order: sums through candle's
 //! `VecOps::vec_reduce_sum` ([`mlp::sum`]), `x · c` as `x · (c as f32) + 0`, the gradients of `minimum`,
 //! `maximum` and the broadcasts by candle's rules, and the log standard deviation's three
-//! gradient contributions accumulated in candle's order. So the weights it trains are
-//! bit-identical to the tensor code's (tested in [`crate::ppo`] and on whole training runs).
+//! gradient contributions accumulated in candle's order. Only the networks' matrix products
+//! sum in another order ([`mlp`]'s, the same on every host), so the weights it trains are the
+//! tensor code's to rounding (tested in [`crate::ppo`]).
 
 use crate::distributions::{HALF_LN_2PI, log_prob_term};
 use crate::error::{Result, RlError};

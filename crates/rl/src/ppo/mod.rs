@@ -877,8 +877,22 @@ mod tests {
         ppo
     }
 
+    /// `a` equals `b` to f32 rounding, with what differs named.
+    fn assert_close(a: &[f32], b: &[f32], what: &str) {
+        assert_eq!(a.len(), b.len(), "{what}");
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!(
+                (x - y).abs() <= 1e-5 * (1.0 + y.abs()),
+                "{what}[{i}]: {x} against {y}"
+            );
+        }
+    }
+
+    /// The written-out update against the tensor code's: the same arithmetic, its matrix
+    /// products summed in another order (the same on every host), so the same weights to
+    /// rounding after each update.
     #[test]
-    fn trains_the_same_weights_as_candles_autograd() {
+    fn trains_the_weights_of_candles_autograd() {
         let base = PpoConfig {
             n_steps: 40,
             batch_size: 16,
@@ -910,15 +924,31 @@ mod tests {
             ours.set_update_threads(threads).unwrap();
             for round in 0..3 {
                 let (a, b) = (ours.update(1.0).unwrap(), reference.update(1.0).unwrap());
+                let scalars = |s: &UpdateStats| {
+                    [
+                        s.policy_loss,
+                        s.value_loss,
+                        s.entropy,
+                        s.approx_kl,
+                        s.clip_fraction,
+                        s.explained_variance,
+                        s.grad_norm,
+                        s.std,
+                    ]
+                };
+                let what = format!("update {round} statistics, {threads} threads, {config:?}");
+                assert_close(&scalars(&a), &scalars(&b), &what);
                 assert_eq!(
-                    a, b,
-                    "update {round} statistics, {threads} threads, {config:?}"
+                    (a.learning_rate, a.epochs_run),
+                    (b.learning_rate, b.epochs_run),
+                    "{what}"
                 );
                 let (wa, wb) = (ours.weights().unwrap(), reference.weights().unwrap());
                 for (name, t) in &wa {
                     let x: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
                     let y: Vec<f32> = wb[name].flatten_all().unwrap().to_vec1().unwrap();
-                    assert_eq!(x, y, "`{name}` after update {round}, {threads} threads");
+                    let what = format!("`{name}` after update {round}, {threads} threads");
+                    assert_close(&x, &y, &what);
                 }
             }
         }
