@@ -475,32 +475,24 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut policy = ActorCritic::new(4, 2, 0, &config(), -0.5, &mut rng).unwrap();
         let obs: Vec<f32> = (0..12).map(|i| (i as f32 * 0.37).sin() * 2.0).collect();
-        let run = |policy: &ActorCritic, deterministic: bool| {
+        // Actions, log-probabilities, values, predicted actions and values again, in a row.
+        let run = |policy: &ActorCritic, deterministic: bool| -> Vec<f32> {
             let mut rng = ChaCha8Rng::seed_from_u64(11);
             let out = policy.act(&obs, deterministic, &mut rng).unwrap();
             let predicted = policy.predict(&obs, deterministic, &mut rng).unwrap();
-            (
+            [
                 out.actions,
                 out.log_probs,
                 out.values,
                 predicted,
                 policy.values(&obs).unwrap(),
-            )
+            ]
+            .concat()
         };
         assert!(policy.written_out);
-        let ours = [run(&policy, false), run(&policy, true)];
+        let x = [run(&policy, false), run(&policy, true)].concat();
         policy.written_out = false;
-        let reference = [run(&policy, false), run(&policy, true)];
-        let flat = |r: &[_; 2]| -> Vec<f32> {
-            r.iter()
-                .flat_map(
-                    |(a, l, v, p, w): &(Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>)| {
-                        [a, l, v, p, w].into_iter().flatten().copied()
-                    },
-                )
-                .collect()
-        };
-        let (x, y) = (flat(&ours), flat(&reference));
+        let y = [run(&policy, false), run(&policy, true)].concat();
         assert_eq!(x.len(), y.len());
         for (i, (a, b)) in x.iter().zip(&y).enumerate() {
             assert!(
