@@ -1,6 +1,7 @@
-//! The matrix products of the pixel policies' layers ([`crate::kernels::dense`],
-//! [`crate::kernels::conv`]): an AVX2 + FMA kernel of our own on CPUs without AVX-512, gemm's
-//! kernels elsewhere.
+//! The networks' matrix products: an AVX2 + FMA kernel of our own for the MLPs
+//! ([`crate::kernels::mlp`]) on every CPU with AVX2 and FMA, and for the pixel policies' layers
+//! ([`crate::kernels::dense`], [`crate::kernels::conv`]) on CPUs without AVX-512; gemm's kernels
+//! elsewhere (called as candle's CPU backend calls them).
 //!
 //! Why by hand: on an AVX2-only CPU the NatureCNN encoder's step (eleven products, 3 GFLOP a
 //! batch of 64) is where the camera policy's training spends its time, and gemm's AVX2 kernel
@@ -13,12 +14,15 @@
 //! - an operand can be read through an [`IndexTable`] (a convolution's patches, in place in
 //!   the image: an implicit GEMM) and a result added through one (col2im inside the product).
 //!
-//! NatureCNN's step took 0.89 of gemm's AVX2 time (`fairgrasp bench cnn`, 5 alternated
-//! pairs; docs/benchmarks.md, "Without AVX-512"). Where the CPU has AVX-512, gemm's AVX-512 kernel runs (on the Intel Xeon it ran
-//! these products at ~71 GFLOP/s, above the 69–70 any AVX2 kernel can reach there). The sums
-//! run in the same order whatever the AVX2 host, so one seed trains one camera policy on all.
+//! NatureCNN's step took 0.89 of gemm's AVX2 time on an AMD Zen 3 and 0.81–0.90 of its
+//! AVX-512 time on a Zen 4 (`fairgrasp bench cnn`; docs/benchmarks.md, "Without AVX-512"). The
+//! image layers keep gemm's AVX-512 kernel where the CPU has it: on an Intel Xeon it ran these
+//! products at ~71 GFLOP/s, above the 69–70 any AVX2 kernel can reach there. The MLPs take
+//! ours everywhere: on their small products gemm's AVX-512 kernel was no faster (the default
+//! training 0.82–0.93 of its time with ours on the Zen 4), and one order of sums lets a seed
+//! train the same PPO weights on every host.
 
-use crate::kernels::mlp::matmul;
+use gemm::{Parallelism, gemm};
 use std::sync::OnceLock;
 
 /// Which kernel multiplies: `FAIRGRASP_IMAGE_KERNEL=avx2` or `=gemm` chooses (read once; the
@@ -73,6 +77,75 @@ impl ProductKernel {
             Self::Gemm => "gemm",
             Self::Avx2 => "avx2",
         }
+    }
+}
+
+/// The thread count candle's CPU backend gives `gemm` (`RAYON_NUM_THREADS`, else the physical
+/// cores), read once per process. candle reads it on every call: without the variable that
+/// parses /proc/cpuinfo (460 times a second in the default training, 10 % of its time in the
+/// kernel); with it (`fairgrasp` sets it) the environment, which still cost the default
+/// training 4.5 % of its wall time (AMD EPYC 2-vCPU host, 5 alternated pairs).
+fn gemm_threads() -> usize {
+    static THREADS: OnceLock<usize> = OnceLock::new();
+    *THREADS.get_or_init(candle_core::utils::get_num_threads)
+}
+
+/// `dst (m × n, row-major) = lhs (m × k) · rhs (k × n)`, the operands given by their row and
+/// column strides: candle's CPU `matmul` call of `gemm`, so that the sums run in its order.
+#[allow(clippy::too_many_arguments)]
+fn matmul(
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    lhs: &[f32],
+    (lhs_rs, lhs_cs): (usize, usize),
+    rhs: &[f32],
+    (rhs_rs, rhs_cs): (usize, usize),
+) {
+    assert!(dst.len() >= m * n, "matmul destination too short");
+    let reach = |rs: usize, cs: usize, rows: usize, cols: usize| {
+        if rows == 0 || cols == 0 {
+            0
+        } else {
+            (rows - 1) * rs + (cols - 1) * cs + 1
+        }
+    };
+    assert!(
+        lhs.len() >= reach(lhs_rs, lhs_cs, m, k),
+        "matmul lhs too short"
+    );
+    assert!(
+        rhs.len() >= reach(rhs_rs, rhs_cs, k, n),
+        "matmul rhs too short"
+    );
+    let threads = gemm_threads();
+    let parallelism = if threads > 1 {
+        Parallelism::Rayon(threads)
+    } else {
+        Parallelism::None
+    };
+    // SAFETY: the asserts above keep every access of the three strided matrices in bounds.
+    unsafe {
+        gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            n as isize,
+            false,
+            lhs.as_ptr(),
+            lhs_cs as isize,
+            lhs_rs as isize,
+            rhs.as_ptr(),
+            rhs_cs as isize,
+            rhs_rs as isize,
+            0.0,
+            1.0,
+            false,
+            false,
+            false,
+            parallelism,
+        )
     }
 }
 
