@@ -7,15 +7,16 @@
 //! arithmetic is a small part. Here the same arithmetic runs on reused buffers (0.3 ms, with
 //! [`crate::ppo::fused_loss`]).
 //!
-//! The matrix products (`x · Wᵀ`, and `g · W`, `xᵀ · g` in the backward pass) run on
-//! [`product_on_every_host`], whose sums run in one order on every CPU with AVX2 and FMA, so a
-//! seed trains the same PPO weights on an AVX-512 host and an AVX2-only one (gemm's kernels,
-//! which candle's `Linear` calls, sum in each CPU's own order). Everything else is candle's
+//! The matrix products (`x · Wᵀ`, and `g · W`, `xᵀ · g` in the backward pass) run on our AVX2
+//! kernel ([`ProductKernel::Avx2`]) on every CPU with AVX2 and FMA, whose sums run in one order
+//! on all of them, so a seed trains the same PPO weights on an AVX-512 host and an AVX2-only
+//! one (gemm's kernels, which candle's `Linear` calls, sum in each CPU's own order). Everything
+//! else is candle's
 //! arithmetic: the bias gradients sum rows in candle's order, and the elementwise steps are its
 //! formulas (tanh through [`crate::kernels::tanh::tanh`], its slope `1 − y²` as
 //! `y² · (−1) + 1`); so the results are candle's to rounding.
 
-use crate::kernels::product::product_on_every_host;
+use crate::kernels::product::{ProductKernel, product_with};
 use crate::kernels::tanh;
 use crate::nn::Mlp;
 use candle_core::cpu::kernels::VecOps;
@@ -124,7 +125,8 @@ pub fn forward(layers: &[LayerParams<'_>], x: &[f32], batch: usize, buffers: &mu
         // Every value is overwritten below (the product does not read its destination).
         out.resize(batch * p.out, 0.0);
         // x · Wᵀ: Wᵀ is W's transposed view, row stride 1 and column stride `inp`.
-        product_on_every_host(
+        product_with(
+            ProductKernel::Avx2,
             (batch, p.out, p.inp),
             out,
             input,
@@ -176,7 +178,8 @@ pub fn backward(
         }
         // Wᵀ's gradient xᵀ · g (`inp × out`), then transposed into W's layout.
         weight_t.resize(p.inp * p.out, 0.0);
-        product_on_every_host(
+        product_with(
+            ProductKernel::Avx2,
             (p.inp, p.out, batch),
             weight_t,
             input,
@@ -195,7 +198,8 @@ pub fn backward(
         }
         // The input's gradient g · W, through the previous layer's tanh: slope y² · (−1) + 1.
         grad_in.resize(batch * p.inp, 0.0);
-        product_on_every_host(
+        product_with(
+            ProductKernel::Avx2,
             (batch, p.inp, p.out),
             grad_in,
             grad,
@@ -213,21 +217,11 @@ pub fn backward(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kernels::assert_close;
     use crate::nn::Activation;
     use candle_core::{DType, Device, Var};
     use candle_nn::{VarBuilder, VarMap};
     use rand::SeedableRng;
-
-    /// `found` equals `want` to f32 rounding (the products sum in another order than candle's).
-    fn assert_close(found: &[f32], want: &[f32], what: &str) {
-        assert_eq!(found.len(), want.len(), "{what}");
-        for (i, (a, b)) in found.iter().zip(want).enumerate() {
-            assert!(
-                (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
-                "{what}[{i}]: {a} against {b}"
-            );
-        }
-    }
 
     #[test]
     fn forward_and_backward_match_candle() {

@@ -24,3 +24,16 @@ pub mod mlp;
 pub mod product;
 pub mod storage;
 pub mod tanh;
+
+/// `found` equals `want` to f32 rounding (sums in another order), what differs named: the
+/// written-out passes against candle's in the tests.
+#[cfg(test)]
+pub(crate) fn assert_close(found: &[f32], want: &[f32], what: &str) {
+    assert_eq!(found.len(), want.len(), "{what}");
+    for (i, (a, b)) in found.iter().zip(want).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
+            "{what}[{i}]: {a} against {b}"
+        );
+    }
+}

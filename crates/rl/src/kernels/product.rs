@@ -32,7 +32,7 @@ use std::sync::OnceLock;
 pub enum ProductKernel {
     /// gemm's kernel for this CPU (AVX-512 where present).
     Gemm,
-    /// This module's AVX2 + FMA kernel.
+    /// This module's AVX2 + FMA kernel (gemm's where the CPU lacks those).
     Avx2,
 }
 
@@ -90,10 +90,12 @@ fn gemm_threads() -> usize {
     *THREADS.get_or_init(candle_core::utils::get_num_threads)
 }
 
-/// `dst (m × n, row-major) = lhs (m × k) · rhs (k × n)`, the operands given by their row and
-/// column strides: candle's CPU `matmul` call of `gemm`, so that the sums run in its order.
-#[allow(clippy::too_many_arguments)]
-fn matmul(
+/// `dst (m × n, row-major) = lhs (m × k) · rhs (k × n)` on gemm, called as candle's CPU
+/// `matmul` calls it, so that the sums run in its order.
+///
+/// # Safety
+/// The strided operands and `dst` lie within their buffers ([`product_with`] checks them).
+unsafe fn gemm_product(
     (m, n, k): (usize, usize, usize),
     dst: &mut [f32],
     lhs: &[f32],
@@ -101,29 +103,13 @@ fn matmul(
     rhs: &[f32],
     (rhs_rs, rhs_cs): (usize, usize),
 ) {
-    assert!(dst.len() >= m * n, "matmul destination too short");
-    let reach = |rs: usize, cs: usize, rows: usize, cols: usize| {
-        if rows == 0 || cols == 0 {
-            0
-        } else {
-            (rows - 1) * rs + (cols - 1) * cs + 1
-        }
-    };
-    assert!(
-        lhs.len() >= reach(lhs_rs, lhs_cs, m, k),
-        "matmul lhs too short"
-    );
-    assert!(
-        rhs.len() >= reach(rhs_rs, rhs_cs, k, n),
-        "matmul rhs too short"
-    );
     let threads = gemm_threads();
     let parallelism = if threads > 1 {
         Parallelism::Rayon(threads)
     } else {
         Parallelism::None
     };
-    // SAFETY: the asserts above keep every access of the three strided matrices in bounds.
+    // SAFETY: the caller vouches for every access of the three strided matrices.
     unsafe {
         gemm(
             m,
@@ -181,31 +167,10 @@ pub fn product(
     );
 }
 
-/// [`product`] on this module's AVX2 kernel wherever the CPU has AVX2 and FMA, AVX-512 or
-/// not (gemm's kernel elsewhere): the sums run in one order on every such host, so a seed
-/// trains the same weights on an AVX-512 host and an AVX2-only one. The MLPs' products
-/// ([`crate::kernels::mlp`]), whose shapes are small enough that gemm's AVX-512 kernel gained
-/// nothing over this one (docs/benchmarks.md, "Without AVX-512").
-pub fn product_on_every_host(
-    (m, n, k): (usize, usize, usize),
-    dst: &mut [f32],
-    lhs: &[f32],
-    lhs_strides: (usize, usize),
-    rhs: &[f32],
-    rhs_strides: (usize, usize),
-) {
-    product_with(
-        ProductKernel::Avx2,
-        (m, n, k),
-        dst,
-        lhs,
-        lhs_strides,
-        rhs,
-        rhs_strides,
-    );
-}
-
-/// [`product`] with the kernel chosen by the caller (benchmarks and tests).
+/// [`product`] with the kernel chosen by the caller. [`ProductKernel::Avx2`] falls back to
+/// gemm's kernel only where the CPU lacks AVX2 or FMA: its sums run in one order on every
+/// other host, so the MLPs ([`crate::kernels::mlp`]) ask for it and a seed trains the same
+/// weights on an AVX-512 host and an AVX2-only one.
 pub fn product_with(
     kernel: ProductKernel,
     (m, n, k): (usize, usize, usize),
@@ -219,7 +184,8 @@ pub fn product_with(
     assert!(lhs.len() >= reach(lrs, lcs, m, k), "product: lhs too short");
     assert!(rhs.len() >= reach(rrs, rcs, k, n), "product: rhs too short");
     if kernel == ProductKernel::Gemm || !avx2::available() {
-        matmul((m, n, k), dst, lhs, (lrs, lcs), rhs, (rrs, rcs));
+        // SAFETY: the asserts above keep every access in bounds.
+        unsafe { gemm_product((m, n, k), dst, lhs, (lrs, lcs), rhs, (rrs, rcs)) };
         return;
     }
     let (lhs, rhs) = (
@@ -993,24 +959,46 @@ mod avx2 {
 mod tests {
     use super::*;
 
-    /// `lhs · rhs` summed in f64, row-major.
+    /// How a reference product sums each result's terms.
+    #[derive(Clone, Copy)]
+    enum Sum {
+        /// In f64, rounded once.
+        InF64,
+        /// In the AVX2 kernel's order, with scalar fused multiply-adds that every CPU rounds
+        /// alike: a chain from zero over each block of 256 steps of the depth, the blocks'
+        /// chains added in turn.
+        InTheKernelsOrder,
+    }
+
+    /// `lhs · rhs`, row-major, each result summed as `sum` says.
     fn naive(
+        sum: Sum,
         (m, n, k): (usize, usize, usize),
         lhs: &[f32],
         (lrs, lcs): (usize, usize),
         rhs: &[f32],
         (rrs, rcs): (usize, usize),
     ) -> Vec<f32> {
-        let mut out = vec![0.0; m * n];
-        for i in 0..m {
-            for j in 0..n {
-                let sum: f64 = (0..k)
-                    .map(|p| lhs[i * lrs + p * lcs] as f64 * rhs[p * rrs + j * rcs] as f64)
-                    .sum();
-                out[i * n + j] = sum as f32;
+        let result = |i: usize, j: usize| {
+            let term = |p: usize| (lhs[i * lrs + p * lcs], rhs[p * rrs + j * rcs]);
+            match sum {
+                Sum::InF64 => (0..k)
+                    .map(|p| term(p).0 as f64 * term(p).1 as f64)
+                    .sum::<f64>() as f32,
+                Sum::InTheKernelsOrder => {
+                    let chain = |start: usize| {
+                        (start..k.min(start + 256)).fold(0.0f32, |acc, p| {
+                            let (a, b) = term(p);
+                            a.mul_add(b, acc)
+                        })
+                    };
+                    (256..k)
+                        .step_by(256)
+                        .fold(chain(0), |total, start| total + chain(start))
+                }
             }
-        }
-        out
+        };
+        (0..m * n).map(|q| result(q / n, q % n)).collect()
     }
 
     fn values(len: usize, seed: usize) -> Vec<f32> {
@@ -1054,7 +1042,7 @@ mod tests {
                 ((k, 1), (1, k)),
                 ((1, m), (1, k)),
             ] {
-                let expected = naive((m, n, k), &lhs, l_strides, &rhs, r_strides);
+                let expected = naive(Sum::InF64, (m, n, k), &lhs, l_strides, &rhs, r_strides);
                 for kernel in [ProductKernel::Gemm, ProductKernel::Avx2] {
                     let mut dst = vec![f32::NAN; m * n];
                     product_with(
@@ -1071,32 +1059,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    /// `lhs · rhs` in the AVX2 kernel's order, with scalar fused multiply-adds that every CPU
-    /// rounds alike: each result a chain from zero over blocks of 256 steps of the depth, the
-    /// blocks' chains added in turn.
-    fn in_the_kernels_order(
-        (m, n, k): (usize, usize, usize),
-        lhs: &[f32],
-        (lrs, lcs): (usize, usize),
-        rhs: &[f32],
-        (rrs, rcs): (usize, usize),
-    ) -> Vec<f32> {
-        let mut out = vec![0.0; m * n];
-        for i in 0..m {
-            for j in 0..n {
-                let mut total = 0.0f32;
-                for start in (0..k).step_by(256) {
-                    let chain = (start..k.min(start + 256)).fold(0.0f32, |acc, p| {
-                        lhs[i * lrs + p * lcs].mul_add(rhs[p * rrs + j * rcs], acc)
-                    });
-                    total = if start == 0 { chain } else { total + chain };
-                }
-                out[i * n + j] = total;
-            }
-        }
-        out
     }
 
     /// What makes a seed train the same MLP weights on every host: the products the MLPs run
@@ -1116,12 +1078,12 @@ mod tests {
             ((64, 64, 600), (1, 64), (64, 1)),
             ((200, 131, 20), (20, 1), (131, 1)),
         ];
-        for ((m, n, k), l_strides, r_strides) in cases {
-            let lhs = values(m * k, m + 3);
-            let rhs = values(k * n, n + 5);
+        for (dims, ls, rs) in cases {
+            let (m, n, k) = dims;
+            let (lhs, rhs) = (values(m * k, m + 3), values(k * n, n + 5));
             let mut dst = vec![f32::NAN; m * n];
-            product_on_every_host((m, n, k), &mut dst, &lhs, l_strides, &rhs, r_strides);
-            let want = in_the_kernels_order((m, n, k), &lhs, l_strides, &rhs, r_strides);
+            product_with(ProductKernel::Avx2, dims, &mut dst, &lhs, ls, &rhs, rs);
+            let want = naive(Sum::InTheKernelsOrder, dims, &lhs, ls, &rhs, rs);
             let differ = dst.iter().zip(&want).filter(|(a, b)| a != b).count();
             assert_eq!(differ, 0, "{m}×{n}×{k}: {differ} results differ");
         }
@@ -1172,7 +1134,7 @@ mod tests {
         gathered_times(&mut dst, gathered, &rhs, (3, 1), 3);
         assert_close(
             &dst,
-            &naive((2, 3, 5), &matrix, (5, 1), &rhs, (3, 1)),
+            &naive(Sum::InF64, (2, 3, 5), &matrix, (5, 1), &rhs, (3, 1)),
             5,
             "gathered · matrix",
         );
@@ -1182,7 +1144,7 @@ mod tests {
         times_gathered(&mut dst, 3, &lhs, (2, 1), gathered);
         assert_close(
             &dst,
-            &naive((3, 5, 2), &lhs, (2, 1), &matrix, (5, 1)),
+            &naive(Sum::InF64, (3, 5, 2), &lhs, (2, 1), &matrix, (5, 1)),
             2,
             "matrix · gathered",
         );
@@ -1190,7 +1152,7 @@ mod tests {
         let (a, b) = (values(8, 4), values(20, 5));
         let mut target = values(13, 6);
         let mut expected = target.clone();
-        let product = naive((2, 5, 4), &a, (4, 1), &b, (5, 1));
+        let product = naive(Sum::InF64, (2, 5, 4), &a, (4, 1), &b, (5, 1));
         for i in 0..2 {
             for j in 0..5 {
                 expected[table.row_start[i] + table.col_offset[j]] += product[i * 5 + j];

@@ -374,6 +374,7 @@ pub(crate) fn obs_tensor(obs: &[f32], obs_dim: usize, device: &Device) -> Result
 mod tests {
     use super::*;
     use crate::algorithm::varmap_tensors;
+    use crate::kernels::assert_close;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
@@ -458,10 +459,7 @@ mod tests {
                     .act_with_critic(&obs, Some(&rows), false, &mut rng)
                     .unwrap();
                 // `values` runs written out; acting through candle sums in candle's order.
-                let values = policy.values(&rows).unwrap();
-                for (a, b) in out.values.iter().zip(&values) {
-                    assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{a} against {b}");
-                }
+                assert_close(&out.values, &policy.values(&rows).unwrap(), "values");
                 out
             };
             let (a, b) = (run([0.0, 0.0, 0.0]), run([1.0, -2.0, 0.5]));
@@ -493,12 +491,6 @@ mod tests {
         let x = [run(&policy, false), run(&policy, true)].concat();
         policy.written_out = false;
         let y = [run(&policy, false), run(&policy, true)].concat();
-        assert_eq!(x.len(), y.len());
-        for (i, (a, b)) in x.iter().zip(&y).enumerate() {
-            assert!(
-                (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
-                "value {i}: {a} against {b}"
-            );
-        }
+        assert_close(&x, &y, "acting");
     }
 }

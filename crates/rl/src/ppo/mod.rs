@@ -834,6 +834,7 @@ pub(crate) fn validate(c: &PpoConfig, n_envs: usize) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kernels::assert_close;
     use fairgrasp_env::random::standard_normal;
     use rand::Rng;
 
@@ -875,17 +876,6 @@ mod tests {
         ppo.buffer
             .compute_returns_and_advantages(&[0.5, -0.5], &[false, true], 0.9, 0.95);
         ppo
-    }
-
-    /// `a` equals `b` to f32 rounding, with what differs named.
-    fn assert_close(a: &[f32], b: &[f32], what: &str) {
-        assert_eq!(a.len(), b.len(), "{what}");
-        for (i, (x, y)) in a.iter().zip(b).enumerate() {
-            assert!(
-                (x - y).abs() <= 1e-5 * (1.0 + y.abs()),
-                "{what}[{i}]: {x} against {y}"
-            );
-        }
     }
 
     /// The written-out update against the tensor code's: the same arithmetic, its matrix
