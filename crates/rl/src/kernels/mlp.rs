@@ -11,10 +11,9 @@
 //! kernel ([`ProductKernel::Avx2`]) on every CPU with AVX2 and FMA, whose sums run in one order
 //! on all of them, so a seed trains the same PPO weights on an AVX-512 host and an AVX2-only
 //! one (gemm's kernels, which candle's `Linear` calls, sum in each CPU's own order). Everything
-//! else is candle's
-//! arithmetic: the bias gradients sum rows in candle's order, and the elementwise steps are its
-//! formulas (tanh through [`crate::kernels::tanh::tanh`], its slope `1 − y²` as
-//! `y² · (−1) + 1`); so the results are candle's to rounding.
+//! else is candle's arithmetic: the bias gradients sum rows in candle's order, and the
+//! elementwise steps are its formulas (tanh through [`crate::kernels::tanh::tanh`], its slope
+//! `1 − y²` as `y² · (−1) + 1`); so the results are candle's to rounding.
 
 use crate::kernels::product::{ProductKernel, product_with};
 use crate::kernels::tanh;

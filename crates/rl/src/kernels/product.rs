@@ -82,9 +82,9 @@ impl ProductKernel {
 
 /// The thread count candle's CPU backend gives `gemm` (`RAYON_NUM_THREADS`, else the physical
 /// cores), read once per process. candle reads it on every call: without the variable that
-/// parses /proc/cpuinfo (460 times a second in the default training, 10 % of its time in the
-/// kernel); with it (`fairgrasp` sets it) the environment, which still cost the default
-/// training 4.5 % of its wall time (AMD EPYC 2-vCPU host, 5 alternated pairs).
+/// parses /proc/cpuinfo (460 times a second in the default training when its products ran on
+/// gemm, 10 % of its time in the kernel); with it (`fairgrasp` sets it) the environment, which
+/// still cost that training 4.5 % of its wall time (AMD EPYC 2-vCPU host, 5 alternated pairs).
 fn gemm_threads() -> usize {
     static THREADS: OnceLock<usize> = OnceLock::new();
     *THREADS.get_or_init(candle_core::utils::get_num_threads)
